@@ -1,0 +1,56 @@
+# tiltrov_ros: the two commands a user needs are `make demo` and `make test`.
+# Both create the virtual environment .venv/ (real rclpy from PyPI's ROS 2
+# Jazzy wheels) when it is absent or out of date.
+
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+OUT    ?= runs/demo
+
+# DDS isolation for the commands run from here: stay on this machine.
+export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
+export MPLBACKEND ?= Agg
+
+.PHONY: install demo test lint typecheck bench soak figures clean help
+
+help:
+	@echo "make demo     run the full stack on the paper's positioning scenario (bag, figures, metrics)"
+	@echo "make test     lint, type-check and run the whole test suite"
+	@echo "make install  create .venv with rclpy (ROS 2 Jazzy wheels) and this package"
+	@echo "make bench    benchmarks (speed ratios against baselines measured in the same run)"
+	@echo "make soak     one hour of simulated time in lockstep (not part of make test)"
+	@echo "make figures  regenerate the README's result table and figures"
+
+install: $(STAMP)
+
+$(STAMP): setup.py setup.cfg package.xml requirements/ros-jazzy.txt requirements/constraints.txt
+	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -c requirements/constraints.txt \
+		-r requirements/ros-jazzy.txt -e '.[bags,dev]'
+	@# colcon must never crawl into the venv (the ROS wheels ship package.xml files).
+	@touch $(VENV)/COLCON_IGNORE
+	@touch $(STAMP)
+
+demo: $(STAMP)
+	$(VENV)/bin/tiltrov demo --out $(OUT)
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check tiltrov_ros test bench
+	$(VENV)/bin/mypy
+
+test: lint
+	$(VENV)/bin/pytest
+
+bench: $(STAMP)
+	$(VENV)/bin/tiltrov bench
+
+soak: $(STAMP)
+	$(VENV)/bin/tiltrov soak
+
+figures: $(STAMP)
+	$(VENV)/bin/tiltrov report --readme README.md
+
+clean:
+	rm -rf $(VENV) build install log .pytest_cache .mypy_cache .ruff_cache runs

@@ -1,0 +1,51 @@
+"""ament_python package set-up for tiltrov_ros.
+
+The ROS 2 client libraries (rclpy and the message packages) are deliberately
+absent from ``install_requires``: inside a ROS 2 install they come from the
+distribution, and in the stand-alone virtual environment they come from
+``requirements/ros-jazzy.txt`` (see the Makefile). Listing them here would make
+a colcon build pull a second rclpy from PyPI.
+"""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = 'tiltrov_ros'
+
+# Executables that `ros2 run tiltrov_ros <name>` finds (setup.cfg puts them in
+# lib/tiltrov_ros) and that a venv install puts on PATH.
+console_scripts = [
+    'tiltrov = tiltrov_ros.cli:main',
+]
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test', 'test.*', 'bench', 'bench.*']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/config', glob('config/*.yaml')),
+        ('share/' + package_name + '/config/scenarios', glob('config/scenarios/*.yaml')),
+    ],
+    python_requires='>=3.11',
+    install_requires=['setuptools', 'numpy>=1.26', 'scipy>=1.11', 'PyYAML>=6.0'],
+    extras_require={
+        # Bag tools and figures.
+        'bags': ['mcap>=1.2', 'mcap-ros2-support>=0.5', 'rosbags>=0.10',
+                 'zstandard>=0.22', 'matplotlib>=3.8'],
+        # Everything `make test` needs besides the ROS wheels.
+        'dev': ['pytest>=8', 'pytest-timeout>=2.3', 'hypothesis>=6.100',
+                'ruff>=0.6', 'mypy>=1.10', 'types-PyYAML',
+                'colcon-common-extensions>=0.3'],
+    },
+    zip_safe=True,
+    maintainer='tiltrov_ros developers',
+    maintainer_email='tiltrov-ros@example.com',
+    description='Underwater robot with four tilting thrusters: simulation, '
+                'hierarchical PD control and thrust allocation for ROS 2 Jazzy.',
+    license='Apache-2.0',
+    tests_require=['pytest'],
+    entry_points={'console_scripts': console_scripts},
+)

@@ -1,0 +1,1 @@
+"""Thin rclpy adapters over :mod:`tiltrov_ros.core`, one module per node."""
