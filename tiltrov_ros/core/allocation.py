@@ -94,6 +94,7 @@ from collections.abc import Collection, Sequence
 from dataclasses import dataclass, replace
 import itertools
 import math
+import sys
 from typing import Literal
 
 import numpy as np
@@ -122,6 +123,8 @@ _FAMILY_RTOL = 1e-12
 _ZERO_PAIR = 1e-12
 # Samples along a one-parameter family of exact solutions.
 _FAMILY_SAMPLES = 97
+# Rows per vectorised chunk of allocate_batch.
+_BATCH_CHUNK = 2048
 # Regularisation of the thrust least squares (relative to the Gram matrix).
 _RIDGE = 1e-12
 # Slack on the limits when checking a candidate.
@@ -333,10 +336,14 @@ class ThrustAllocator:
         thrusts = np.zeros((n, 4))
         tilts = np.zeros((n, 2))
         todo = np.ones(n, dtype=bool)
-        if not (self.mode == 'robust' and self.failed_thrusters) and n:
-            rows, f, t = self._choose_batch(taus, prev)
-            thrusts[rows], tilts[rows] = f, t
-            todo[rows] = False
+        if not (self.mode == 'robust' and self.failed_thrusters):
+            for start in range(0, n, _BATCH_CHUNK):     # chunks stay in cache
+                part = slice(start, min(start + _BATCH_CHUNK, n))
+                rows, f, t = self._choose_batch(taus[part],
+                                                None if prev is None else prev[part])
+                rows = rows + start
+                thrusts[rows], tilts[rows] = f, t
+                todo[rows] = False
         for i in np.flatnonzero(todo):
             prev_i = None if prev is None else _tilts_only(prev[i])
             res = self.allocate(taus[i], prev_i)
@@ -390,9 +397,9 @@ class ThrustAllocator:
         q = np.array([f1 * sa, f2 * sa, f3 * sb, f4 * sb, f1 * ca, f2 * ca, f3 * cb, f4 * cb])
         achieved = self._A @ q
         diff = achieved - tau
-        error = math.sqrt(float(np.dot(diff * self.weights, diff * self.weights)))
-        tol = FEASIBILITY_RTOL * max(math.sqrt(float(np.dot(tau, tau))), self.max_thrust)
-        feasible = math.sqrt(float(np.dot(diff, diff))) <= tol
+        error = _norm(diff * (self.weights / self.weights.max())) * float(self.weights.max())
+        tol = FEASIBILITY_RTOL * max(_norm(tau), self.max_thrust)
+        feasible = _norm(diff) <= tol
         return AllocationResult(f, a, b, achieved, feasible, tau.copy(), method,
                                 float(discriminant), error)
 
@@ -465,8 +472,9 @@ class ThrustAllocator:
             h = (0.5 * (V + Df), 0.5 * (V - Df), 0.5 * (H - V + Dr), 0.5 * (H - V - Dr))
             f1, f2, alpha, free_f = _pair_scalar(z[0], h[0], z[1], h[1])
             f3, f4, beta, free_r = _pair_scalar(z[2], h[2], z[3], h[3])
-            configs.append(_Config(np.array([f1, f2, f3, f4]) * scale,
-                                   np.array([alpha, beta]), False, (free_f, free_r)))
+            with np.errstate(over='ignore'):      # inf thrusts fail the limit check
+                thrusts = np.array([f1, f2, f3, f4]) * scale
+            configs.append(_Config(thrusts, np.array([alpha, beta]), False, (free_f, free_r)))
         return configs, disc
 
     def _configs_from_batch(self, tau: FloatArray) -> list[_Config]:
@@ -582,17 +590,24 @@ class ThrustAllocator:
         s, c = np.sin(gamma), np.cos(gamma)
         return self._Az * s + self._Ah * c, self._Az * c - self._Ah * s
 
+    def _error_weights(self, tau: FloatArray) -> FloatArray:
+        """Weights divided by the request's size: the same minimiser, no overflow."""
+        size = max(float(np.max(np.abs(tau))), self.max_thrust)
+        weights: FloatArray = self.weights / size
+        return weights
+
     def _thrusts_for_tilts(self, tau: FloatArray,
                            tilts: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Box-constrained weighted least-squares thrusts for each row of tilts (m, 2).
 
-        Returns thrusts (m, 4) and the weighted squared wrench errors (m,).
+        Returns thrusts (m, 4) and the (scaled) weighted squared wrench errors (m,).
         """
+        w = self._error_weights(tau)
         gamma = tilts[:, [0, 0, 1, 1]]                              # (m, 4)
         B = (self._Az[None] * np.sin(gamma)[:, None, :]
-             + self._Ah[None] * np.cos(gamma)[:, None, :]) * self.weights[None, :, None]
+             + self._Ah[None] * np.cos(gamma)[:, None, :]) * w[None, :, None]
         upper = np.where(self._available, self.max_thrust, 0.0)
-        return _bounded_lstsq(B, tau * self.weights, -upper, upper)
+        return _bounded_lstsq(B, tau * w, -upper, upper)
 
     def _optimize(self, tau: FloatArray, prev: FloatArray | None, box: FloatArray,
                   starts: list[FloatArray],
@@ -625,7 +640,7 @@ class ThrustAllocator:
         fmax = np.where(self._available, self.max_thrust, 0.0)
         lower = np.concatenate([-fmax, box[:, 0]])
         upper = np.concatenate([fmax, box[:, 1]])
-        w = self.weights
+        w = self._error_weights(tau)
         x = np.concatenate([f0, t0])
 
         def residual(x: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -742,6 +757,11 @@ class ThrustAllocator:
         tol = FEASIBILITY_RTOL * np.maximum(np.linalg.norm(tau, axis=1), self.max_thrust)
         good = np.linalg.norm(achieved - tau, axis=1) <= tol
         return rows[good], f[good], t[good]
+
+
+def _norm(v: FloatArray) -> float:
+    """Euclidean norm without intermediate overflow, capped at the largest float."""
+    return min(math.hypot(*v.tolist()), sys.float_info.max)
 
 
 def _tilts_only(prev: FloatArray) -> AllocationResult:
@@ -892,7 +912,9 @@ def _solve_batch(tau: FloatArray, length: float, width: float, k: float) -> _Sol
     valid[zero_row, 0] = True
     thrusts[zero_row] = 0.0
     free[zero_row] = True
-    return _Solved(thrusts * s[:, None, None], tilts, valid, family, free,
+    with np.errstate(over='ignore', invalid='ignore'):  # inf thrusts fail the limit check
+        thrusts = thrusts * s[:, None, None]
+    return _Solved(thrusts, tilts, valid, family, free,
                    np.where(any_family | zero_row, np.nan, disc))
 
 
