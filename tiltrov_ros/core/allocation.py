@@ -1,0 +1,1024 @@
+"""Thrust allocation for four thrusters that share two tilt servos (Section 3).
+
+The paper's method, made correct and complete (``mode='paper'``), and a robust
+allocator built on it (``mode='robust'``, the default).
+
+Decomposition (Section 3.1)
+---------------------------
+tau = A q (5) with q = (f_i sin(tilt_i), f_i cos(tilt_i)): the vertical
+components z = q[0:4] only enter (Z, K, M) and the horizontal ones h = q[4:8]
+only (X, Y, N). The pseudo-inverse c = A^+ tau plus the two null-space
+directions of A give q = c + N xi, eqs. (10)-(11). One tilt per pair imposes
+(9): q1 q6 = q2 q5 and q3 q8 = q4 q7.
+
+Re-derivation used here
+-----------------------
+Write each pair with sums and differences: for the front pair
+Zf = z1 + z2, Uf = z1 - z2, Hf = h1 + h2, Df = h1 - h2 (rear: Zr, Ur, Hr, Dr).
+The wrench fixes four of them,
+
+    Zf = -Z/2 + M/l,   Zr = -Z/2 - M/l,                  (rows Z, M of (4))
+    Df = (sqrt2 Y + N/k)/2,  Dr = (sqrt2 Y - N/k)/2,     (rows Y, N; k = (l+d)/(2 sqrt2))
+    Uf - Ur = kappa = 2K/d,  Hf + Hr = H = sqrt2 X,      (rows K, X)
+
+and leaves two null-space coordinates free, U = Uf and V = Hf
+(U = c1 - c2 - 2 xi2 and V = c5 + c6 - 2 xi1 in the paper's notation).
+Constraint (9) for a pair, z1 h2 = z2 h1, is exactly Uf Hf = Zf Df, so (9) is
+
+    U V = P,   (U - kappa)(H - V) = Q,   P = Zf Df,  Q = Zr Dr,        (*)
+
+two rectangular hyperbolas. For U not in {0, kappa}, eliminating V gives the
+quadratic that replaces (12)-(15):
+
+    H U^2 - (P + Q + kappa H) U + kappa P = 0.                         (**)
+
+Errors in the printed formulas (each checked by a test in
+``test/core/test_allocation.py``):
+
+* (7) pairs the wrong components: f1 = sign(q5) sqrt(q1^2 + q5^2) (printed
+  sqrt(q1^2 + q3^2)), and likewise f2 from (q2, q6), f3 from (q3, q7), f4 from
+  (q4, q8).
+* (14): c_bar = (-c1 + c2) b2 + (c1 c6 - c2 c5); the printed c_bar drops the
+  constant term of the first equation of (12).
+* (8) uses arctan(q1/q5), which loses the quadrant and divides by zero at
+  +-90 deg; here the tilt is atan2 folded into the tilt range, with a signed
+  thrust.
+* (13) divides by -c1 + c2 + c3 - c4, which is -2K/d for the minimum-norm c,
+  and (15) by a_bar = 2 b1, proportional to X/K: they vanish for every
+  left-right symmetric wrench (K = 0) and whenever X = 0, that is in ordinary
+  hovering. (**) divides by neither; what remains are the one-parameter
+  families of solutions below, which the paper does not cover.
+
+Solution sets of (*):
+
+* generic: the roots of (**) (one double root when its discriminant is zero,
+  none when it is negative: the paper's Delta < 0), plus U = 0 or U = kappa when
+  they solve (*);
+* family F1 (P = Q = kappa = 0, e.g. surge + heave + pitch): U = 0, V free;
+* family F2 (P = Q = H = 0, e.g. pure heave or pure pitch): V = 0, U free;
+* family F3 (kappa = H = 0, P = -Q != 0): V = P/U, U free.
+
+A tilt gamma and gamma +- pi give the same thrust line (the thrust changes
+sign): every such alternative within the tilt range is a candidate too, so a
+tilt near +90 deg is not flipped to -90 deg when it need not be.
+
+Choosing the solution (Section 3.2, completed)
+----------------------------------------------
+Among discrete solutions, the one whose tilts move least from ``previous``
+(sum of squared tilt changes; from 0 without ``previous``), as in the paper;
+only solutions within the thrust limit and the tilt range (and, in robust
+mode, within ``max_tilt_step`` of ``previous``) qualify. Within a family, "moves
+the tilts least" has no minimiser worth having (it pushes the thrusts to their
+limit to avoid any tilt motion), so the member with the least thrust
+(sum f_i^2) among those that qualify is chosen, ties going to the least tilt
+motion; the unconstrained least-thrust member is the pseudo-inverse solution
+xi = 0 (F1: V = H/2, F2: U = kappa/2, F3: U^2 = |P|).
+
+Robust mode
+-----------
+Exact whenever an exact solution qualifies: then the same answer as the
+paper mode. When none does (negative discriminant, thrust beyond the limit,
+tilts out of range or out of reach), it returns the attainable configuration
+with the least weighted wrench error ||W (tau(f, alpha, beta) - tau_d)||: from
+warm starts (the closed-form candidates and the paper mode's answer, clipped
+into reach, the previous tilts, a coarse grid), a projected Levenberg-Marquardt
+iteration over the four thrusts and two tilts, with the thrusts finally
+re-solved exactly for the tilts found (a box-constrained linear least-squares
+problem, :func:`_bounded_lstsq`). The paper mode's answer is kept if nothing
+beats it, so the robust error is never worse than the paper mode's.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Collection, Sequence
+from dataclasses import dataclass, replace
+import itertools
+import math
+import sys
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from tiltrov_ros.core.errors import AllocationError
+from tiltrov_ros.core.thrust_map import allocation_matrix, thrust_wrench
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+
+Mode = Literal['paper', 'robust']
+
+SQRT2 = math.sqrt(2.0)
+HALF_PI = 0.5 * math.pi
+#: Default per-DOF weights (X, Y, Z, K, M, N) of the wrench error in robust mode:
+#: depth and attitude first.
+DEFAULT_WEIGHTS = (1.0, 1.0, 10.0, 10.0, 10.0, 1.0)
+#: Relative tolerance under which a wrench counts as produced exactly:
+#: ||achieved - requested|| <= FEASIBILITY_RTOL * max(||requested||, max_thrust).
+FEASIBILITY_RTOL = 1e-9
+# Relative size under which P, Q, kappa, H count as zero (family detection).
+_FAMILY_RTOL = 1e-12
+# A pair whose components (scaled so that max |tau_i| = 1) are below this has
+# no thrust and a free tilt: its share of the wrench is below 1e-12 relative.
+_ZERO_PAIR = 1e-12
+# Samples along a one-parameter family of exact solutions.
+_FAMILY_SAMPLES = 97
+# Rows per vectorised chunk of allocate_batch.
+_BATCH_CHUNK = 2048
+# Regularisation of the thrust least squares (relative to the Gram matrix).
+_RIDGE = 1e-12
+# Slack on the limits when checking a candidate.
+_LIMIT_SLACK = 1e-12
+
+
+@dataclass(frozen=True)
+class AllocationResult:
+    """Thrusts and tilts for one wrench.
+
+    Attributes
+    ----------
+    thrusts : (4,) thrusts of thruster_1..4 [N]
+    tilt_front, tilt_rear : alpha and beta [rad]
+    achieved : (6,) wrench that the thrusts and tilts produce by eq. (4)
+    feasible : True when ``achieved`` equals the request (see FEASIBILITY_RTOL)
+    requested : (6,) the wrench asked for (non-finite components read as 0)
+    method : how it was found: ``exact`` (a root of (**)), ``family`` (a member
+        of a one-parameter family), ``zero`` (zero wrench), ``saturated`` (paper
+        mode: the chosen root clipped to the limits), ``pseudo`` (paper mode:
+        Section 3.2 case 3, Delta < 0), ``optimized`` (robust fallback),
+        ``fixed_tilt`` (:meth:`ThrustAllocator.allocate_fixed`)
+    discriminant : discriminant of (**) for the wrench scaled to max |tau_i| = 1;
+        NaN where (**) does not apply (families, zero wrench, fixed tilts)
+    error : weighted wrench error ||W (achieved - requested)||
+    """
+
+    thrusts: FloatArray
+    tilt_front: float
+    tilt_rear: float
+    achieved: FloatArray
+    feasible: bool
+    requested: FloatArray
+    method: str
+    discriminant: float
+    error: float
+
+    @property
+    def tilts(self) -> FloatArray:
+        """(tilt_front, tilt_rear) [rad]."""
+        return np.array([self.tilt_front, self.tilt_rear])
+
+
+@dataclass(frozen=True)
+class BatchResult:
+    """Allocation of many wrenches at once (rows independent)."""
+
+    thrusts: FloatArray      # (n, 4) [N]
+    tilt_front: FloatArray   # (n,) [rad]
+    tilt_rear: FloatArray    # (n,) [rad]
+    achieved: FloatArray     # (n, 6)
+    feasible: BoolArray      # (n,)
+    error: FloatArray        # (n,) weighted wrench error
+
+
+@dataclass(frozen=True)
+class _Config:
+    """One exact candidate (thrusts scaled back to the request)."""
+
+    thrusts: FloatArray      # (4,)
+    tilts: FloatArray        # (2,)
+    family: bool
+    tilt_free: tuple[bool, bool]   # pair with zero thrust: any tilt will do
+
+
+class ThrustAllocator:
+    """Allocate a body wrench to four thrusts and two tilts.
+
+    The API of ``../shared/notes/interfaces.md``: ``allocate(wrench, previous)``
+    returns an :class:`AllocationResult`.
+
+    Parameters
+    ----------
+    length, width : l and d, thruster spacing along x and y [m]
+    max_thrust : thrust limit of each thruster, both directions [N]
+    tilt_limits : (min, max) tilt angle [rad], within [-pi, pi]
+    max_tilt_step : how far each tilt may move from ``previous`` in one call [rad]
+    mode : ``'robust'`` (default) or ``'paper'``
+    weights : per-DOF weights (X, Y, Z, K, M, N) of the wrench error
+    failed_thrusters : indices 0..3 of thrusters that produce no thrust
+    """
+
+    def __init__(self, length: float, width: float, max_thrust: float = 40.0,
+                 tilt_limits: tuple[float, float] = (-HALF_PI, HALF_PI),
+                 max_tilt_step: float = math.inf, mode: Mode = 'robust',
+                 weights: Sequence[float] = DEFAULT_WEIGHTS,
+                 failed_thrusters: Collection[int] = ()) -> None:
+        if not (math.isfinite(length) and length > 0):
+            raise AllocationError(f'length must be a finite number > 0 m, got {length}')
+        if not (math.isfinite(width) and width > 0):
+            raise AllocationError(f'width must be a finite number > 0 m, got {width}')
+        if not (math.isfinite(max_thrust) and max_thrust > 0):
+            raise AllocationError(f'max_thrust must be a finite number > 0 N, got {max_thrust}')
+        lo, hi = (float(v) for v in tilt_limits)
+        if not (math.isfinite(lo) and math.isfinite(hi) and -math.pi <= lo < hi <= math.pi):
+            raise AllocationError(
+                f'tilt_limits must satisfy -pi <= min < max <= pi, got {tilt_limits}')
+        if not (max_tilt_step > 0):
+            raise AllocationError(f'max_tilt_step must be > 0 rad, got {max_tilt_step}')
+        if mode not in ('paper', 'robust'):
+            raise AllocationError(f"mode must be 'paper' or 'robust', got {mode!r}")
+        w = np.array(weights, dtype=float)
+        if w.shape != (6,) or not np.all(np.isfinite(w)) or np.any(w <= 0):
+            raise AllocationError(f'weights must be 6 finite numbers > 0, got {weights}')
+        failed = sorted({int(i) for i in failed_thrusters})
+        if any(i not in range(4) for i in failed):
+            raise AllocationError(f'failed_thrusters must be indices 0..3, got {failed}')
+        self.length = float(length)
+        self.width = float(width)
+        self.max_thrust = float(max_thrust)
+        self.tilt_limits = (lo, hi)
+        self.max_tilt_step = float(max_tilt_step)
+        self.mode: Mode = mode
+        self.weights = w
+        self.failed_thrusters = tuple(failed)
+        self._available = np.ones(4, dtype=bool)
+        self._available[failed] = False
+        self._A = allocation_matrix(self.length, self.width)
+        self._A_pinv = np.linalg.pinv(self._A)
+        self._k = (self.length + self.width) / (2.0 * SQRT2)
+        # Columns of eq. (4) per thruster: b_i(gamma) = A_z,i sin(gamma) + A_h,i cos(gamma).
+        self._Az = self._A[:, :4]
+        self._Ah = self._A[:, 4:]
+
+    def __repr__(self) -> str:
+        return (f'ThrustAllocator(length={self.length}, width={self.width}, '
+                f'max_thrust={self.max_thrust}, tilt_limits={self.tilt_limits}, '
+                f'max_tilt_step={self.max_tilt_step}, mode={self.mode!r}, '
+                f'weights={tuple(self.weights)}, failed_thrusters={self.failed_thrusters})')
+
+    # ------------------------------------------------------------------ public API
+
+    def wrench(self, thrusts: ArrayLike, tilt_front: ArrayLike,
+               tilt_rear: ArrayLike) -> FloatArray:
+        """Eq. (4) with this allocator's geometry."""
+        return thrust_wrench(thrusts, tilt_front, tilt_rear, self.length, self.width)
+
+    def allocate(self, wrench: ArrayLike,
+                 previous: AllocationResult | None = None) -> AllocationResult:
+        """Thrusts and tilts that produce ``wrench`` = (X, Y, Z, K, M, N).
+
+        ``previous`` is an earlier result: the tilts move least from it and at
+        most ``max_tilt_step``. Non-finite wrench components are read as 0 and
+        the result is then never ``feasible``.
+        """
+        tau, finite = self._check_wrench(wrench)
+        prev = self._previous_tilts(previous)
+        box = self._tilt_box(prev)
+        if self.mode == 'robust' and self.failed_thrusters:
+            # The closed form cannot hold a thruster at zero: optimise directly.
+            result = self._optimize(tau, prev, box, starts=[], incumbent=None)
+        else:
+            configs, disc = self._candidates(tau)
+            result_or_none = self._choose(tau, configs, disc, prev, box)
+            if result_or_none is not None:
+                result = result_or_none
+            else:
+                paper = self._paper_fallback(tau, configs, disc, prev, box)
+                if self.mode == 'paper':
+                    result = paper
+                else:
+                    starts = [paper.tilts] + [c.tilts for c in configs]
+                    result = self._optimize(tau, prev, box, starts=starts, incumbent=paper)
+                    result = replace(result, discriminant=disc)
+        return self._finish(result, finite)
+
+    def allocate_fixed(self, wrench: ArrayLike, tilt_front: float, tilt_rear: float,
+                       previous: AllocationResult | None = None) -> AllocationResult:
+        """Thrusts for tilts held at (``tilt_front``, ``tilt_rear``).
+
+        The linear allocation of the switching baseline (tilts at 0 or 90 deg):
+        the thrusts minimise the weighted wrench error within the thrust limit.
+        The tilts are clipped to the range and to ``max_tilt_step`` from
+        ``previous``; a non-finite requested tilt keeps the previous one.
+        """
+        tau, finite = self._check_wrench(wrench)
+        prev = self._previous_tilts(previous)
+        box = self._tilt_box(prev)
+        request = np.array([tilt_front, tilt_rear], dtype=float)
+        keep = prev if prev is not None else np.zeros(2)
+        request = np.where(np.isfinite(request), request, keep)
+        tilts = np.clip(request, box[:, 0], box[:, 1])
+        thrusts, _ = self._thrusts_for_tilts(tau, tilts[None, :])
+        result = self._make(tau, thrusts[0], tilts, 'fixed_tilt', math.nan)
+        return self._finish(result, finite)
+
+    def allocate_batch(self, wrenches: ArrayLike,
+                       previous_tilts: ArrayLike | None = None) -> BatchResult:
+        """Allocate many wrenches at once, each row on its own.
+
+        The closed form is vectorised over the rows; rows without a qualifying
+        exact solution go one by one through :meth:`allocate`'s fallback (the
+        paper's, or the robust optimiser). ``previous_tilts``: (n, 2) or None.
+        """
+        taus = np.array(wrenches, dtype=float)
+        if taus.ndim != 2 or taus.shape[1] != 6:
+            raise AllocationError(f'wrenches must have shape (n, 6), got {taus.shape}')
+        n = len(taus)
+        finite = np.all(np.isfinite(taus), axis=1)
+        taus = np.where(np.isfinite(taus), taus, 0.0)
+        prev: FloatArray | None = None
+        if previous_tilts is not None:
+            prev = np.array(previous_tilts, dtype=float)
+            if prev.shape != (n, 2):
+                raise AllocationError(
+                    f'previous_tilts must have shape ({n}, 2), got {prev.shape}')
+            prev = np.where(np.isfinite(prev), prev, 0.0)
+            prev = np.clip(prev, *self.tilt_limits)
+        thrusts = np.zeros((n, 4))
+        tilts = np.zeros((n, 2))
+        todo = np.ones(n, dtype=bool)
+        if not (self.mode == 'robust' and self.failed_thrusters):
+            for start in range(0, n, _BATCH_CHUNK):     # chunks stay in cache
+                part = slice(start, min(start + _BATCH_CHUNK, n))
+                rows, f, t = self._choose_batch(taus[part],
+                                                None if prev is None else prev[part])
+                rows = rows + start
+                thrusts[rows], tilts[rows] = f, t
+                todo[rows] = False
+        for i in np.flatnonzero(todo):
+            prev_i = None if prev is None else _tilts_only(prev[i])
+            res = self.allocate(taus[i], prev_i)
+            thrusts[i], tilts[i] = res.thrusts, res.tilts
+        thrusts[:, ~self._available] = 0.0
+        achieved = self.wrench(thrusts, tilts[:, 0], tilts[:, 1])
+        error = np.linalg.norm((achieved - taus) * self.weights, axis=1)
+        tol = FEASIBILITY_RTOL * np.maximum(np.linalg.norm(taus, axis=1), self.max_thrust)
+        feasible = finite & (np.linalg.norm(achieved - taus, axis=1) <= tol)
+        return BatchResult(thrusts, tilts[:, 0].copy(), tilts[:, 1].copy(), achieved,
+                           feasible, error)
+
+    # ------------------------------------------------------------------ boundaries
+
+    @staticmethod
+    def _check_wrench(wrench: ArrayLike) -> tuple[FloatArray, bool]:
+        try:
+            tau = np.array(wrench, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise AllocationError(f'wrench must be 6 numbers, got {wrench!r}') from exc
+        if tau.shape != (6,):
+            raise AllocationError(f'wrench must have shape (6,), got {tau.shape}')
+        finite = bool(np.all(np.isfinite(tau)))
+        return (tau if finite else np.where(np.isfinite(tau), tau, 0.0)), finite
+
+    def _previous_tilts(self, previous: AllocationResult | None) -> FloatArray | None:
+        if previous is None:
+            return None
+        prev = np.array([previous.tilt_front, previous.tilt_rear], dtype=float)
+        if not np.all(np.isfinite(prev)):
+            return None
+        clipped: FloatArray = np.clip(prev, *self.tilt_limits)
+        return clipped
+
+    def _tilt_box(self, prev: FloatArray | None) -> FloatArray:
+        """[[lo, hi] front, [lo, hi] rear] reachable in this call."""
+        lo, hi = self.tilt_limits
+        if prev is None or not math.isfinite(self.max_tilt_step):
+            return np.array([[lo, hi], [lo, hi]])
+        return np.column_stack([np.maximum(lo, prev - self.max_tilt_step),
+                                np.minimum(hi, prev + self.max_tilt_step)])
+
+    def _make(self, tau: FloatArray, thrusts: FloatArray, tilts: FloatArray, method: str,
+              discriminant: float) -> AllocationResult:
+        f = np.array(thrusts, dtype=float)
+        f[~self._available] = 0.0
+        a, b = float(tilts[0]), float(tilts[1])
+        sa, ca, sb, cb = math.sin(a), math.cos(a), math.sin(b), math.cos(b)
+        f1, f2, f3, f4 = f.tolist()
+        # Eq. (5): tau = A q, the same map as eq. (4).
+        q = np.array([f1 * sa, f2 * sa, f3 * sb, f4 * sb, f1 * ca, f2 * ca, f3 * cb, f4 * cb])
+        achieved = self._A @ q
+        diff = achieved - tau
+        error = _norm(diff * (self.weights / self.weights.max())) * float(self.weights.max())
+        tol = FEASIBILITY_RTOL * max(_norm(tau), self.max_thrust)
+        feasible = _norm(diff) <= tol
+        return AllocationResult(f, a, b, achieved, feasible, tau.copy(), method,
+                                float(discriminant), error)
+
+    def _finish(self, result: AllocationResult, finite: bool) -> AllocationResult:
+        """Last line of defence: limits hold and nothing non-finite leaves."""
+        lo, hi = self.tilt_limits
+        fmax = self.max_thrust
+        if (lo <= result.tilt_front <= hi and lo <= result.tilt_rear <= hi
+                and all(-fmax <= v <= fmax for v in result.thrusts.tolist())):
+            return result if finite else replace(result, feasible=False)
+        f = np.clip(np.nan_to_num(result.thrusts, nan=0.0, posinf=0.0, neginf=0.0),
+                    -self.max_thrust, self.max_thrust)
+        t = np.clip(np.nan_to_num(result.tilts, nan=0.0), *self.tilt_limits)
+        if not (np.array_equal(f, result.thrusts) and np.array_equal(t, result.tilts)):
+            result = self._make(result.requested, f, t, result.method, result.discriminant)
+        if not finite:
+            result = replace(result, feasible=False)
+        return result
+
+    # ------------------------------------------------------------------ closed form
+
+    def _candidates(self, tau: FloatArray) -> tuple[list[_Config], float]:
+        """Exact solutions of (*) for one wrench, and the discriminant of (**)."""
+        scale = max(abs(float(v)) for v in tau)
+        if scale == 0.0:
+            return [_Config(np.zeros(4), np.zeros(2), False, (True, True))], math.nan
+        X, Y, Z, K, M, N = (float(v) / scale for v in tau)
+        Zf, Zr = -0.5 * Z + M / self.length, -0.5 * Z - M / self.length
+        Df, Dr = 0.5 * (SQRT2 * Y + N / self._k), 0.5 * (SQRT2 * Y - N / self._k)
+        kappa, H = 2.0 * K / self.width, SQRT2 * X
+        P, Q = Zf * Df, Zr * Dr
+        mag = max(abs(Zf), abs(Zr), abs(Df), abs(Dr), abs(kappa), abs(H))
+        tol1, tol2 = _FAMILY_RTOL * mag, _FAMILY_RTOL * mag * mag
+        small_P, small_Q = abs(P) <= tol2, abs(Q) <= tol2
+        small_k, small_H = abs(kappa) <= tol1, abs(H) <= tol1
+        if ((small_P and small_Q and (small_k or small_H))
+                or (small_k and small_H and abs(P + Q) <= tol2)):
+            # Rare and not speed critical: the vectorised family sampler.
+            return self._configs_from_batch(tau), math.nan
+        a, b, c = H, -(P + Q + kappa * H), kappa * P
+        disc = b * b - 4.0 * a * c
+        roots: list[float] = []
+        if disc >= -1e-14 * max(b * b, abs(4.0 * a * c)):
+            sq = math.sqrt(max(disc, 0.0))
+            qq = -0.5 * (b + (sq if b >= 0 else -sq))
+            if a != 0.0:
+                roots.append(qq / a)
+            if qq != 0.0:
+                roots.append(c / qq)
+            elif a == 0.0:
+                roots.append(0.0)
+        if small_P:
+            roots.append(0.0)
+        if small_Q:
+            roots.append(kappa)
+        configs = []
+        for U in roots:
+            use_p = abs(U) >= abs(U - kappa)
+            if (U if use_p else U - kappa) == 0.0:
+                continue          # U = kappa = 0 leaves V free: a family, handled above
+            V = P / U if use_p else H - Q / (U - kappa)
+            if not (math.isfinite(U) and math.isfinite(V)):
+                continue
+            size = mag * mag + abs(U * V) + abs((U - kappa) * (H - V))
+            if (abs(U * V - P) > 1e-9 * size
+                    or abs((U - kappa) * (H - V) - Q) > 1e-9 * size):
+                continue
+            z = (0.5 * (Zf + U), 0.5 * (Zf - U), 0.5 * (Zr + U - kappa),
+                 0.5 * (Zr - U + kappa))
+            h = (0.5 * (V + Df), 0.5 * (V - Df), 0.5 * (H - V + Dr), 0.5 * (H - V - Dr))
+            f1, f2, alpha, free_f = _pair_scalar(z[0], h[0], z[1], h[1])
+            f3, f4, beta, free_r = _pair_scalar(z[2], h[2], z[3], h[3])
+            with np.errstate(over='ignore'):      # inf thrusts fail the limit check
+                thrusts = np.array([f1, f2, f3, f4]) * scale
+            configs.append(_Config(thrusts, np.array([alpha, beta]), False, (free_f, free_r)))
+        return configs, disc
+
+    def _configs_from_batch(self, tau: FloatArray) -> list[_Config]:
+        solved = _solve_batch(tau[None, :], self.length, self.width, self._k)
+        return [_Config(solved.thrusts[0, j], solved.tilts[0, j], bool(solved.family[0, j]),
+                        (bool(solved.tilt_free[0, j, 0]), bool(solved.tilt_free[0, j, 1])))
+                for j in np.flatnonzero(solved.valid[0])]
+
+    def _variants(self, cfg: _Config, prev: FloatArray | None,
+                  box: FloatArray) -> list[tuple[tuple[float, ...], tuple[float, float]]]:
+        """(thrusts, tilts) of a candidate for every equivalent tilt in range.
+
+        gamma + pi turns the thrust line around: same line, thrust negated. A
+        pair without thrust takes the previous tilt (or 0), clipped into reach.
+        """
+        lo, hi = self.tilt_limits
+        per_pair: list[list[tuple[float, float]]] = []
+        for p in range(2):
+            if cfg.tilt_free[p]:
+                rest = float(prev[p]) if prev is not None else 0.0
+                per_pair.append([(min(max(rest, float(box[p, 0])), float(box[p, 1])), 1.0)])
+                continue
+            gamma = float(cfg.tilts[p])
+            options = [(gamma + shift, sign) for shift, sign in
+                       ((0.0, 1.0), (math.pi, -1.0), (-math.pi, -1.0))
+                       if lo - _LIMIT_SLACK <= gamma + shift <= hi + _LIMIT_SLACK]
+            per_pair.append(options or [(gamma, 1.0)])
+        f1, f2, f3, f4 = (float(v) for v in cfg.thrusts)
+        return [((f1 * s_f, f2 * s_f, f3 * s_r, f4 * s_r), (alpha, beta))
+                for (alpha, s_f), (beta, s_r) in itertools.product(*per_pair)]
+
+    def _choose(self, tau: FloatArray, configs: list[_Config], disc: float,
+                prev: FloatArray | None, box: FloatArray) -> AllocationResult | None:
+        """The exact candidate the rule of Section 3.2 picks among those that qualify.
+
+        Qualify: thrusts within the limit, tilts within the range and, in robust
+        mode, within ``max_tilt_step`` of ``previous``. Paper mode then clips the
+        tilts to ``max_tilt_step`` (losing exactness, reported as 'saturated').
+        Plain floats: this is the hot path of every control cycle.
+        """
+        ref0, ref1 = (float(prev[0]), float(prev[1])) if prev is not None else (0.0, 0.0)
+        fmax = self.max_thrust * (1.0 + _LIMIT_SLACK)
+        lo, hi = self.tilt_limits
+        if self.mode == 'robust':
+            lo0, hi0 = float(box[0, 0]) - _LIMIT_SLACK, float(box[0, 1]) + _LIMIT_SLACK
+            lo1, hi1 = float(box[1, 0]) - _LIMIT_SLACK, float(box[1, 1]) + _LIMIT_SLACK
+        else:
+            lo0 = lo1 = lo - _LIMIT_SLACK
+            hi0 = hi1 = hi + _LIMIT_SLACK
+        best = None
+        for cfg in configs:
+            for f, (a, b) in self._variants(cfg, prev, box):
+                if max(abs(f[0]), abs(f[1]), abs(f[2]), abs(f[3])) > fmax:
+                    continue
+                if not (lo0 <= a <= hi0 and lo1 <= b <= hi1):
+                    continue
+                move = (a - ref0) ** 2 + (b - ref1) ** 2
+                thrust2 = f[0] * f[0] + f[1] * f[1] + f[2] * f[2] + f[3] * f[3]
+                key = (thrust2, move, 0.0) if cfg.family else (0.0, move, thrust2)
+                if best is None or key < best[0]:
+                    best = (key, f, a, b, cfg.family)
+        if best is None:
+            return None
+        _, f, a, b, family = best
+        a, b = min(max(a, lo), hi), min(max(b, lo), hi)
+        method = 'zero' if not any(f) else ('family' if family else 'exact')
+        ca = min(max(a, float(box[0, 0])), float(box[0, 1]))
+        cb = min(max(b, float(box[1, 0])), float(box[1, 1]))
+        if (ca, cb) != (a, b):                   # paper mode only
+            method, a, b = 'saturated', ca, cb
+        return self._make(tau, np.array(f), np.array([a, b]), method, disc)
+
+    def _paper_fallback(self, tau: FloatArray, configs: list[_Config], disc: float,
+                        prev: FloatArray | None, box: FloatArray) -> AllocationResult:
+        """Section 3.2 case 3, and saturation: a pseudo solution within the limits.
+
+        With real roots that all violate the limits, the root the paper's rule
+        picks (least tilt motion) is clipped to them. With no real root
+        (Delta < 0), xi = 0: q = c, each thruster's own angle from (8), per pair
+        the one of left/right closer to ``previous``, each thrust the signed
+        projection of its (horizontal, vertical) component on that line, then
+        clipped to the limits.
+        """
+        ref = prev if prev is not None else np.zeros(2)
+        options = [v for cfg in configs for v in self._variants(cfg, prev, box)]
+        if options:
+            f_best, t_best = min(options, key=lambda v: (
+                (v[1][0] - ref[0]) ** 2 + (v[1][1] - ref[1]) ** 2, sum(x * x for x in v[0])))
+            thrusts, tilts = np.array(f_best), np.array(t_best)
+            method = 'saturated'
+        else:
+            c = self._A_pinv @ tau
+            z, h = c[:4], c[4:]
+            angles = _fold_tilt(np.arctan2(z, h))
+            strength = np.hypot(z, h)
+            tilts = np.zeros(2)
+            for p, (i, j) in enumerate(((0, 1), (2, 3))):
+                left = angles[i] if strength[i] > 0 else ref[p]
+                right = angles[j] if strength[j] > 0 else ref[p]
+                tilts[p] = left if abs(left - ref[p]) <= abs(right - ref[p]) else right
+            pair = np.array([0, 0, 1, 1])
+            thrusts = h * np.cos(tilts[pair]) + z * np.sin(tilts[pair])
+            method = 'pseudo'
+        tilts = np.clip(np.clip(tilts, *self.tilt_limits), box[:, 0], box[:, 1])
+        thrusts = np.clip(thrusts, -self.max_thrust, self.max_thrust)
+        return self._make(tau, thrusts, tilts, method, disc)
+
+    # ------------------------------------------------------------------ robust fallback
+
+    def _columns(self, tilts: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Eq. (4) columns b_i(tilt) (6, 4) and their tilt derivatives."""
+        gamma = tilts[[0, 0, 1, 1]]
+        s, c = np.sin(gamma), np.cos(gamma)
+        return self._Az * s + self._Ah * c, self._Az * c - self._Ah * s
+
+    def _error_weights(self, tau: FloatArray) -> FloatArray:
+        """Weights divided by the request's size: the same minimiser, no overflow."""
+        size = max(float(np.max(np.abs(tau))), self.max_thrust)
+        weights: FloatArray = self.weights / size
+        return weights
+
+    def _thrusts_for_tilts(self, tau: FloatArray,
+                           tilts: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Box-constrained weighted least-squares thrusts for each row of tilts (m, 2).
+
+        Returns thrusts (m, 4) and the (scaled) weighted squared wrench errors (m,).
+        """
+        w = self._error_weights(tau)
+        gamma = tilts[:, [0, 0, 1, 1]]                              # (m, 4)
+        B = (self._Az[None] * np.sin(gamma)[:, None, :]
+             + self._Ah[None] * np.cos(gamma)[:, None, :]) * w[None, :, None]
+        upper = np.where(self._available, self.max_thrust, 0.0)
+        return _bounded_lstsq(B, tau * w, -upper, upper)
+
+    def _optimize(self, tau: FloatArray, prev: FloatArray | None, box: FloatArray,
+                  starts: list[FloatArray],
+                  incumbent: AllocationResult | None) -> AllocationResult:
+        """Least weighted wrench error over the thrusts and the reachable tilts."""
+        lo, hi = box[:, 0], box[:, 1]
+        points = [np.clip(s, lo, hi) for s in starts if np.all(np.isfinite(s))]
+        if prev is not None:
+            points.append(np.clip(prev, lo, hi))
+        grid = (0.0, 0.5, 1.0)
+        points.extend(lo + (hi - lo) * np.array([a, b]) for a in grid for b in grid)
+        cand = np.unique(np.array(points), axis=0)
+        thrusts, cost = self._thrusts_for_tilts(tau, cand)
+        order = np.argsort(cost, kind='stable')[:3]
+        best_f, best_t, best_c = thrusts[order[0]], cand[order[0]], float(cost[order[0]])
+        for k in order:
+            _, t = self._levenberg_marquardt(tau, thrusts[k], cand[k], box)
+            f_exact, c_exact = self._thrusts_for_tilts(tau, t[None, :])
+            if c_exact[0] < best_c:
+                best_f, best_t, best_c = f_exact[0], t, float(c_exact[0])
+        result = self._make(tau, best_f, best_t, 'optimized', math.nan)
+        if incumbent is not None and incumbent.error <= result.error:
+            return incumbent
+        return result
+
+    def _levenberg_marquardt(self, tau: FloatArray, f0: FloatArray, t0: FloatArray,
+                             box: FloatArray, iterations: int = 40
+                             ) -> tuple[FloatArray, FloatArray]:
+        """Projected Levenberg-Marquardt on x = (f1..f4, alpha, beta) within bounds."""
+        fmax = np.where(self._available, self.max_thrust, 0.0)
+        lower = np.concatenate([-fmax, box[:, 0]])
+        upper = np.concatenate([fmax, box[:, 1]])
+        w = self._error_weights(tau)
+        x = np.concatenate([f0, t0])
+
+        def residual(x: FloatArray) -> tuple[FloatArray, FloatArray]:
+            B, dB = self._columns(x[4:])
+            r = (B @ x[:4] - tau) * w
+            J = np.empty((6, 6))
+            J[:, :4] = B * w[:, None]
+            J[:, 4] = (dB[:, :2] @ x[:2]) * w
+            J[:, 5] = (dB[:, 2:] @ x[2:4]) * w
+            return r, J
+
+        r, J = residual(x)
+        cost = float(r @ r)
+        lam = 1e-3
+        span = np.maximum(upper - lower, 1e-12)
+        for _ in range(iterations):
+            g = J.T @ r
+            eps = 1e-12 * span
+            active = (((x <= lower + eps) & (g > 0)) | ((x >= upper - eps) & (g < 0))
+                      | (lower == upper))
+            free = ~active
+            if not np.any(free):
+                break
+            JF = J[:, free]
+            N = JF.T @ JF
+            improved = False
+            while lam < 1e10:
+                Nd = N + lam * (np.diag(np.diag(N)) + 1e-12 * np.eye(len(N)))
+                step = np.zeros(6)
+                step[free] = -np.linalg.solve(Nd, g[free])
+                x_new = np.clip(x + step, lower, upper)
+                r_new, J_new = residual(x_new)
+                cost_new = float(r_new @ r_new)
+                if cost_new < cost:
+                    gain = cost - cost_new
+                    x, r, J, cost = x_new, r_new, J_new, cost_new
+                    lam = max(lam / 3.0, 1e-12)
+                    improved = gain > 1e-14 * (cost + 1e-300)
+                    break
+                lam *= 5.0
+            if not improved or cost <= 1e-30:
+                break
+        return x[:4], x[4:]
+
+    # ------------------------------------------------------------------ batch
+
+    def _choose_batch(self, taus: FloatArray, prev: FloatArray | None
+                      ) -> tuple[NDArray[np.intp], FloatArray, FloatArray]:
+        """Vectorised :meth:`_choose` for the rows whose pick is exact.
+
+        Returns the row indices done, their thrusts (k, 4) and tilts (k, 2).
+        Rows on a family (many candidate slots) and the others (four slots)
+        are solved apart, so a few hovering rows do not slow the rest down.
+        """
+        family = _family_rows(taus, self.length, self.width, self._k)
+        rows_out, f_out, t_out = [], [], []
+        for subset in (np.flatnonzero(~family), np.flatnonzero(family)):
+            if len(subset) == 0:
+                continue
+            sub_prev = None if prev is None else prev[subset]
+            rows, f, t = self._choose_rows(taus[subset], sub_prev)
+            rows_out.append(subset[rows])
+            f_out.append(f)
+            t_out.append(t)
+        if not rows_out:
+            return np.zeros(0, dtype=np.intp), np.zeros((0, 4)), np.zeros((0, 2))
+        return np.concatenate(rows_out), np.concatenate(f_out), np.concatenate(t_out)
+
+    def _choose_rows(self, taus: FloatArray, prev: FloatArray | None
+                     ) -> tuple[NDArray[np.intp], FloatArray, FloatArray]:
+        n = len(taus)
+        lo, hi = self.tilt_limits
+        ref = np.zeros((n, 2)) if prev is None else prev
+        if prev is None or not math.isfinite(self.max_tilt_step):
+            box_lo, box_hi = np.full((n, 2), lo), np.full((n, 2), hi)
+        else:
+            box_lo = np.maximum(lo, prev - self.max_tilt_step)
+            box_hi = np.minimum(hi, prev + self.max_tilt_step)
+        solved = _solve_batch(taus, self.length, self.width, self._k)
+        # Equivalent tilts gamma + {0, pi, -pi} per pair: 9 variants per candidate.
+        shifts = np.array([0.0, math.pi, -math.pi])
+        signs = np.array([1.0, -1.0, -1.0])
+        va = np.repeat(np.arange(3), 3)                                 # (9,)
+        vb = np.tile(np.arange(3), 3)
+        tilts = solved.tilts[:, :, None, :] + np.stack([shifts[va], shifts[vb]], axis=1)
+        sign = np.stack([signs[va], signs[va], signs[vb], signs[vb]], axis=1)  # (9, 4)
+        thrusts = solved.thrusts[:, :, None, :] * sign                  # (n, m, 9, 4)
+        free = solved.tilt_free[:, :, None, :]                          # (n, m, 1, 2)
+        # A free pair rests at its previous tilt, once (variant 0 only).
+        rest = np.clip(ref, box_lo, box_hi)[:, None, None, :]
+        is_base = np.stack([va == 0, vb == 0], axis=1)[None, None]      # (1, 1, 9, 2)
+        tilts = np.where(free, rest, tilts)
+        ok = solved.valid[:, :, None] & np.all(~free | is_base, axis=3)
+        fmax = self.max_thrust * (1.0 + _LIMIT_SLACK)
+        ok &= np.all(np.abs(thrusts) <= fmax, axis=3)
+        ok &= np.all((tilts >= lo - _LIMIT_SLACK) & (tilts <= hi + _LIMIT_SLACK), axis=3)
+        if self.mode == 'robust':
+            ok &= np.all((tilts >= box_lo[:, None, None, :] - _LIMIT_SLACK)
+                         & (tilts <= box_hi[:, None, None, :] + _LIMIT_SLACK), axis=3)
+        fam = solved.family[:, :, None] & np.ones((1, 1, 9), dtype=bool)
+        move = np.sum((tilts - ref[:, None, None, :]) ** 2, axis=3)
+        thrust2 = np.sum(thrusts ** 2, axis=3)
+        primary = np.where(ok, np.where(fam, thrust2, 0.0), np.inf).reshape(n, -1)
+        secondary = move.reshape(n, -1)
+        tertiary = np.where(fam, 0.0, thrust2).reshape(n, -1)
+        rows = np.flatnonzero(ok.reshape(n, -1).any(axis=1))
+        pick: NDArray[np.intp] = np.lexsort((tertiary, secondary, primary), axis=1)[rows, 0]
+        f = thrusts.reshape(n, -1, 4)[rows, pick]
+        t = np.clip(tilts.reshape(n, -1, 2)[rows, pick], lo, hi)
+        if self.mode == 'paper':
+            t = np.clip(t, box_lo[rows], box_hi[rows])
+        achieved = thrust_wrench(f, t[:, 0], t[:, 1], self.length, self.width)
+        tau = taus[rows]
+        tol = FEASIBILITY_RTOL * np.maximum(np.linalg.norm(tau, axis=1), self.max_thrust)
+        good = np.linalg.norm(achieved - tau, axis=1) <= tol
+        return rows[good], f[good], t[good]
+
+
+def _norm(v: FloatArray) -> float:
+    """Euclidean norm without intermediate overflow, capped at the largest float."""
+    return min(math.hypot(*v.tolist()), sys.float_info.max)
+
+
+def _tilts_only(prev: FloatArray) -> AllocationResult:
+    """A stand-in previous result that carries only tilts (batch fallback)."""
+    z = np.zeros(6)
+    return AllocationResult(np.zeros(4), float(prev[0]), float(prev[1]), z, True, z,
+                            'previous', math.nan, 0.0)
+
+
+def _fold_tilt(angle: FloatArray) -> FloatArray:
+    """Fold a thrust-line angle into (-pi/2, pi/2] (the thrust takes the sign)."""
+    folded = np.where(angle > HALF_PI, angle - math.pi, angle)
+    return np.where(folded <= -HALF_PI, folded + math.pi, folded)
+
+
+def _pair_geometry(tau: FloatArray, length: float, width: float,
+                   k: float) -> tuple[FloatArray, ...]:
+    """Zf, Zr, Df, Dr, kappa, H of the module docstring (for tau of shape (..., 6))."""
+    X, Y, Z, K, M, N = np.moveaxis(np.asarray(tau), -1, 0)
+    Zf = -0.5 * Z + M / length
+    Zr = -0.5 * Z - M / length
+    Df = 0.5 * (SQRT2 * Y + N / k)
+    Dr = 0.5 * (SQRT2 * Y - N / k)
+    kappa = 2.0 * K / width
+    H = SQRT2 * X
+    return Zf, Zr, Df, Dr, kappa, H
+
+
+def _pair_scalar(z_i: float, h_i: float, z_j: float,
+                 h_j: float) -> tuple[float, float, float, bool]:
+    """Corrected (7)-(8) for one pair: signed thrusts, the pair's tilt, free flag.
+
+    f_i is the signed length of thruster i's own (h_i, z_i); the pair's thrust
+    line comes from its stronger thruster (atan2, folded into (-pi/2, pi/2]),
+    and each thrust is the signed projection on that line.
+    """
+    n_i, n_j = math.hypot(z_i, h_i), math.hypot(z_j, h_j)
+    if max(n_i, n_j) <= _ZERO_PAIR:
+        return 0.0, 0.0, 0.0, True
+    z, h = (z_i, h_i) if n_i >= n_j else (z_j, h_j)
+    gamma = math.atan2(z, h)
+    if gamma > HALF_PI:
+        gamma -= math.pi
+    elif gamma <= -HALF_PI:
+        gamma += math.pi
+    c, s = math.cos(gamma), math.sin(gamma)
+    return h_i * c + z_i * s, h_j * c + z_j * s, gamma, False
+
+
+@dataclass(frozen=True)
+class _Solved:
+    """Exact candidates for n wrenches, m candidate slots each."""
+
+    thrusts: FloatArray       # (n, m, 4)
+    tilts: FloatArray         # (n, m, 2)
+    valid: BoolArray          # (n, m)
+    family: BoolArray         # (n, m)
+    tilt_free: BoolArray      # (n, m, 2)
+    discriminant: FloatArray  # (n,)
+
+
+def _classify(tau: FloatArray, length: float, width: float, k: float
+              ) -> tuple[tuple[FloatArray, ...], tuple[BoolArray, BoolArray, BoolArray],
+                         FloatArray]:
+    """Pair quantities of tau / s and the family flags, for tau (n, 6).
+
+    Returns ((Zf, Zr, Df, Dr, kappa, H, P, Q, mag), (fam1, fam2, fam3), s).
+    """
+    n = len(tau)
+    peak = np.max(np.abs(tau), axis=1)
+    s = np.where(peak > 0, peak, 1.0)
+    Zf, Zr, Df, Dr, kappa, H = _pair_geometry(tau / s[:, None], length, width, k)
+    P, Q = Zf * Df, Zr * Dr
+    mag = np.maximum.reduce([np.abs(Zf), np.abs(Zr), np.abs(Df), np.abs(Dr),
+                             np.abs(kappa), np.abs(H), np.full(n, 1e-300)])
+    tol1, tol2 = _FAMILY_RTOL * mag, _FAMILY_RTOL * mag ** 2
+    small_P, small_Q = np.abs(P) <= tol2, np.abs(Q) <= tol2
+    small_k, small_H = np.abs(kappa) <= tol1, np.abs(H) <= tol1
+    fam1 = small_P & small_Q & small_k
+    fam2 = small_P & small_Q & small_H
+    fam3 = small_k & small_H & (np.abs(P + Q) <= tol2) & ~(small_P & small_Q)
+    return (Zf, Zr, Df, Dr, kappa, H, P, Q, mag), (fam1, fam2, fam3), s
+
+
+def _family_rows(tau: FloatArray, length: float, width: float, k: float) -> BoolArray:
+    """Rows whose solutions form a one-parameter family (or the zero wrench)."""
+    _, (fam1, fam2, fam3), _ = _classify(tau, length, width, k)
+    family: BoolArray = fam1 | fam2 | fam3
+    return family
+
+
+def _solve_batch(tau: FloatArray, length: float, width: float, k: float) -> _Solved:
+    """All exact (U, V) of (*) for each row of tau (n, 6), mapped to actuators.
+
+    The vectorised twin of :meth:`ThrustAllocator._candidates` (a test keeps
+    them equal), with the one-parameter families sampled. The problem is
+    homogeneous of degree one in tau: it is solved for tau / s
+    (s = max |tau_i|) and the thrusts are scaled back, so huge wrenches do not
+    overflow and tolerances are relative.
+    """
+    (Zf, Zr, Df, Dr, kappa, H, P, Q, mag), (fam1, fam2, fam3), s = _classify(
+        tau, length, width, k)
+    peak = np.max(np.abs(tau), axis=1)
+    tol2 = _FAMILY_RTOL * mag ** 2
+    small_P, small_Q = np.abs(P) <= tol2, np.abs(Q) <= tol2
+    any_family = fam1 | fam2 | fam3
+
+    # Roots of (**), a U^2 + b U + c = 0, in the cancellation-free form.
+    a, b, c = H, -(P + Q + kappa * H), kappa * P
+    disc = b * b - 4 * a * c
+    real = disc >= -1e-14 * np.maximum(b * b, np.abs(4 * a * c))
+    sq = np.sqrt(np.maximum(disc, 0.0))
+    qq = -0.5 * (b + np.where(b >= 0, sq, -sq))
+    with np.errstate(divide='ignore', invalid='ignore'):
+        u1 = np.where(a != 0, qq / a, np.nan)
+        u2 = np.where(qq != 0, c / qq, np.where(a == 0, 0.0, np.nan))
+    roots = [np.where(real, u1, np.nan), np.where(real, u2, np.nan),
+             np.where(small_P, 0.0, np.nan), np.where(small_Q, kappa, np.nan)]
+    U = np.stack(roots, axis=1)
+    U = np.where(any_family[:, None], np.nan, U)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        v_p = P[:, None] / U
+        v_q = H[:, None] - Q[:, None] / (U - kappa[:, None])
+    V = np.where(np.abs(U) >= np.abs(U - kappa[:, None]), v_p, v_q)
+    family = np.zeros(U.shape, dtype=bool)
+    if np.any(any_family):
+        fu, fv = _family_samples(fam1, fam2, fam3, H, kappa, P, mag)
+        U = np.concatenate([U, fu], axis=1)
+        V = np.concatenate([V, fv], axis=1)
+        family = np.concatenate([family, np.ones(fu.shape, dtype=bool)], axis=1)
+
+    valid = np.isfinite(U) & np.isfinite(V)
+    U = np.where(valid, U, 0.0)
+    V = np.where(valid, V, 0.0)
+    kap, HH = kappa[:, None], H[:, None]
+    size = mag[:, None] ** 2 + np.abs(U * V) + np.abs((U - kap) * (HH - V))
+    valid &= np.abs(U * V - P[:, None]) <= 1e-9 * size
+    valid &= np.abs((U - kap) * (HH - V) - Q[:, None]) <= 1e-9 * size
+
+    z = 0.5 * np.stack([Zf[:, None] + U, Zf[:, None] - U,
+                        Zr[:, None] + U - kap, Zr[:, None] - U + kap], axis=2)
+    h = 0.5 * np.stack([V + Df[:, None], V - Df[:, None],
+                        HH - V + Dr[:, None], HH - V - Dr[:, None]], axis=2)
+    thrusts, tilts, free = _pairs_to_actuators(z, h)
+    # The zero wrench: everything is zero and both tilts are free.
+    zero_row = peak == 0
+    valid[zero_row, 1:] = False
+    valid[zero_row, 0] = True
+    thrusts[zero_row] = 0.0
+    free[zero_row] = True
+    with np.errstate(over='ignore', invalid='ignore'):  # inf thrusts fail the limit check
+        thrusts = thrusts * s[:, None, None]
+    return _Solved(thrusts, tilts, valid, family, free,
+                   np.where(any_family | zero_row, np.nan, disc))
+
+
+def _family_samples(fam1: BoolArray, fam2: BoolArray, fam3: BoolArray, H: FloatArray,
+                    kappa: FloatArray, P: FloatArray,
+                    mag: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """(U, V) samples along the one-parameter families, NaN where a row has none.
+
+    Spread around each family's least-thrust member, which is included:
+    F1 (U = 0): V = H/2; F2 (V = 0): U = kappa/2; F3 (V = P/U): U = +-sqrt|P|.
+    """
+    n, s = len(H), _FAMILY_SAMPLES
+    spread = mag[:, None] * np.tan(np.linspace(-1.5, 1.5, s))[None, :]
+    nan = np.full((n, s), np.nan)
+    f1_u = np.where(fam1[:, None], 0.0, nan)
+    f1_v = np.where(fam1[:, None], 0.5 * H[:, None] + spread, nan)
+    f2_u = np.where(fam2[:, None], 0.5 * kappa[:, None] + spread, nan)
+    f2_v = np.where(fam2[:, None], 0.0, nan)
+    half = (s + 1) // 2
+    ratio = np.exp(np.linspace(-3.0, 3.0, half))
+    sign = np.concatenate([np.ones(half), -np.ones(s - half)])
+    ratio = np.concatenate([ratio, ratio[: s - half]])
+    u3 = np.where(fam3[:, None], sign * np.sqrt(np.abs(P))[:, None] * ratio, nan)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        v3 = np.where(fam3[:, None], P[:, None] / u3, nan)
+    return (np.concatenate([f1_u, f2_u, u3], axis=1),
+            np.concatenate([f1_v, f2_v, v3], axis=1))
+
+
+def _pairs_to_actuators(z: FloatArray,
+                        h: FloatArray) -> tuple[FloatArray, FloatArray, BoolArray]:
+    """Vectorised :func:`_pair_scalar` over (..., 4) vertical/horizontal parts."""
+    shape = z.shape[:-1]
+    thrusts = np.zeros(z.shape)
+    tilts = np.zeros((*shape, 2))
+    free = np.zeros((*shape, 2), dtype=bool)
+    for p, (i, j) in enumerate(((0, 1), (2, 3))):
+        n_i, n_j = np.hypot(z[..., i], h[..., i]), np.hypot(z[..., j], h[..., j])
+        lead = n_i >= n_j
+        zero = np.maximum(n_i, n_j) <= _ZERO_PAIR
+        gamma = _fold_tilt(np.arctan2(np.where(lead, z[..., i], z[..., j]),
+                                      np.where(lead, h[..., i], h[..., j])))
+        gamma = np.where(zero, 0.0, gamma)
+        c, s = np.cos(gamma), np.sin(gamma)
+        thrusts[..., i] = np.where(zero, 0.0, h[..., i] * c + z[..., i] * s)
+        thrusts[..., j] = np.where(zero, 0.0, h[..., j] * c + z[..., j] * s)
+        tilts[..., p] = gamma
+        free[..., p] = zero
+    return thrusts, tilts, free
+
+
+# ---------------------------------------------------------------------- bounded LS
+
+
+# Active-set patterns of four variables: 0 free, 1 at the lower bound, 2 at the upper.
+_PATTERNS = np.array(list(itertools.product((0, 1, 2), repeat=4)))
+
+
+def _bounded_lstsq(B: FloatArray, target: FloatArray, lower: FloatArray,
+                   upper: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """min ||B x - target||^2 with lower <= x <= upper, exactly, for a stack B (m, 6, 4).
+
+    The unconstrained solution is tried first; rows where it leaves the box
+    try every active set (each variable free, at its lower or at its upper
+    bound: 3^4 patterns) at once and keep the best one whose free variables
+    stay within their bounds: for a convex quadratic that is the global
+    minimum. A tiny ridge makes singular configurations (both tilts at 90 deg,
+    say) pick the least-thrust solution.
+    """
+    G = np.einsum('mij,mik->mjk', B, B)
+    G = G + _RIDGE * (np.trace(G, axis1=1, axis2=2)[:, None, None] + 1e-300) * np.eye(4)
+    g = np.einsum('mij,i->mj', B, target)
+    x = np.linalg.solve(G, g[..., None])[..., 0]
+    slack = 1e-9 * (np.abs(upper) + 1.0)
+    inside = np.all((x >= lower - slack) & (x <= upper + slack), axis=1) & (lower < upper).all()
+    out = np.flatnonzero(~inside)
+    if len(out):
+        x[out] = _enumerate_active_sets(G[out], g[out], lower, upper)
+    x = np.clip(x, lower, upper)
+    resid = np.einsum('mij,mj->mi', B, x) - target
+    return x, np.sum(resid ** 2, axis=1)
+
+
+def _enumerate_active_sets(G: FloatArray, g: FloatArray, lower: FloatArray,
+                           upper: FloatArray) -> FloatArray:
+    """Best feasible active-set solution of min x'Gx/2 - g'x for each row."""
+    pats = _PATTERNS
+    degenerate = lower == upper          # failed thrusters: only 'at the bound'
+    allowed = ~np.any(degenerate & (pats != 1), axis=1)
+    pats = pats[allowed]
+    fixed = pats > 0                                                # (p, 4)
+    value = np.where(pats == 1, lower, np.where(pats == 2, upper, 0.0))
+    eye = np.eye(4)
+    # Free rows: G_FF x_F = g_F - G_F,fix x_fix; fixed rows: x_i = bound.
+    Gs = np.where(fixed[None, :, :, None], eye[None, None],
+                  np.where(fixed[None, :, None, :], 0.0, G[:, None]))
+    rhs = np.where(fixed[None], value[None],
+                   g[:, None, :] - np.einsum('mjk,pk->mpj', G, value))
+    x = np.linalg.solve(Gs, rhs[..., None])[..., 0]                 # (m, p, 4)
+    slack = 1e-9 * (np.abs(upper) + 1.0)
+    feasible = np.all((x >= lower - slack) & (x <= upper + slack), axis=2)
+    x = np.clip(x, lower, upper)
+    cost = 0.5 * np.einsum('mpj,mjk,mpk->mp', x, G, x) - np.einsum('mpj,mj->mp', x, g)
+    cost = np.where(feasible, cost, np.inf)
+    best = np.argmin(cost, axis=1)
+    result: FloatArray = x[np.arange(len(G)), best]
+    return result
