@@ -11,6 +11,13 @@ damping, a project decision)::
     M nu_dot + C(nu) nu + D(nu_r) nu_r + g(eta) = tau  (1)
     nu_r  = nu - [R(q)^T v_c; 0]                       v_c: current in NED
 
+Because C(nu) takes the absolute velocity (M of (A.2) lumps rigid-body and
+added mass, so C_RB and C_A cannot be told apart), a robot drifting with the
+water along two body axes at once still feels the Munk moment
+(m_i - m_j) nu_i nu_j, although the water is at rest relative to it. Fossen's
+form M_RB nu_dot + C_RB(nu) nu + M_A nu_r_dot + C_A(nu_r) nu_r + ... would need
+that split.
+
 Two implementations of the same right-hand side:
 
 * :func:`f` - the reference, one numpy line per equation, citing the paper and
