@@ -1,0 +1,402 @@
+"""Wrench controllers: the paper's PD (16), the switching baseline, and a PID beyond it.
+
+Every controller has one method, ``update(t, position, quaternion, nu,
+reference) -> ControlOutput``, fed with exactly what the ``odom``,
+``setpoint`` and ``setpoint_velocity`` messages carry (see ARCHITECTURE.md), so
+the ROS node and the headless runner give the same numbers.
+
+* ``pd`` - eq. (16): tau = J(eta)^T (Kp e + Kd e_dot), e = eta_d - eta in the
+  earth frame (angle errors wrapped to (-pi, pi]), e_dot = eta_d_dot - J(eta) nu
+  (the paper's e_dot = -J nu when regulating, plus the reference velocity when
+  tracking).
+* ``switching`` - the selective switching controller of the paper's
+  reference [2] (Jin et al., IEEE/ASME T-Mech 2015), reconstructed: a
+  horizontal mode (both tilts 0 deg: surge, sway, yaw controlled) and a
+  vertical mode (both tilts 90 deg: heave, roll, pitch controlled). It asks the
+  allocator for those tilts (``ControlOutput.tilt_request``), so the
+  allocation in each mode is linear. Rule: the mode switches when the other
+  group's normalised error exceeds the current group's by the hysteresis
+  factor and the dwell time since the last switch has passed; while the servos
+  travel (|delta tilt| / rate limit + settle time) the wrench is zero.
+* ``pid`` - PD plus the restoring forces g(eta) of the controller's nominal
+  model and integral action with a clamp (anti-windup): the constant moment of
+  the center-of-mass modeling error and the net buoyancy leave no steady-state
+  error.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+import math
+from pathlib import Path
+from typing import Any, ClassVar, Literal, Protocol
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+import yaml
+
+from tiltrov_ros.core.dynamics import restoring_forces
+from tiltrov_ros.core.errors import ParameterError
+from tiltrov_ros.core.kinematics import J, Rquat, euler_from_quat, quat_normalize, ssa
+from tiltrov_ros.core.params import RobotParams
+
+FloatArray = NDArray[np.float64]
+
+ControllerKind = Literal['pd', 'switching', 'pid']
+CONTROLLER_KINDS: tuple[str, ...] = ('pd', 'switching', 'pid')
+DOF_NAMES = ('x', 'y', 'z', 'roll', 'pitch', 'yaw')
+CONTROLLER_YAML = 'wrench_controller.yaml'
+
+# |cos(pitch)| under which J(eta) is evaluated at a pitch just short of +-90 deg.
+_GIMBAL_COS = 1e-6
+# Switching baseline: the wrench components each mode can produce.
+_HORIZONTAL = np.array([1.0, 1.0, 0.0, 0.0, 0.0, 1.0])
+_VERTICAL = np.array([0.0, 0.0, 1.0, 1.0, 1.0, 0.0])
+
+
+@dataclass(frozen=True)
+class Reference:
+    """Desired pose and its rate, as the ``setpoint`` messages carry them.
+
+    position : (3,) eta_d position in NED [m]
+    quaternion : (4,) (w, x, y, z) desired attitude
+    velocity : (6,) d(eta_d)/dt: (x, y, z) rates [m/s], (roll, pitch, yaw) rates [rad/s]
+    """
+
+    position: FloatArray
+    quaternion: FloatArray
+    velocity: FloatArray = field(default_factory=lambda: np.zeros(6))
+
+    @classmethod
+    def hold(cls, position: ArrayLike = (0.0, 0.0, 0.0),
+             quaternion: ArrayLike = (1.0, 0.0, 0.0, 0.0)) -> Reference:
+        return cls(np.asarray(position, dtype=float), np.asarray(quaternion, dtype=float),
+                   np.zeros(6))
+
+
+@dataclass(frozen=True)
+class ControlOutput:
+    """A controller's answer for one control tick.
+
+    wrench : (6,) body wrench (X, Y, Z, K, M, N) [N, N m]
+    tilt_request : None, or (tilt_front, tilt_rear) [rad] for a fixed-tilt allocation
+    mode : what the controller is doing (``pd``, ``pid``, ``horizontal``,
+        ``vertical``, ``transition``), for diagnostics and logs
+    """
+
+    wrench: FloatArray
+    tilt_request: tuple[float, float] | None = None
+    mode: str = ''
+
+
+class Controller(Protocol):
+    """What the runner and the ``wrench_controller`` node call."""
+
+    def reset(self) -> None: ...
+
+    def update(self, t: float, position: FloatArray, quaternion: FloatArray, nu: FloatArray,
+               reference: Reference) -> ControlOutput: ...
+
+
+# --------------------------------------------------------------------------- configuration
+
+
+def _vector(mapping: Mapping[str, Any], key: str, prefix: str, source: str | None,
+            *, size: int = 6, minimum: float = 0.0) -> tuple[float, ...]:
+    name = f'{prefix}.{key}'
+    if key not in mapping:
+        raise ParameterError(name, f'missing; allowed: {size} numbers >= {minimum}',
+                             source=source)
+    value = mapping[key]
+    if (not isinstance(value, (list, tuple)) or len(value) != size
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)):
+        raise ParameterError(name, f'got {value!r}; allowed: {size} numbers >= {minimum}',
+                             source=source)
+    out = tuple(float(v) for v in value)
+    if not all(math.isfinite(v) and v >= minimum for v in out):
+        raise ParameterError(name, f'got {value!r}; allowed: {size} finite numbers >= {minimum}',
+                             source=source)
+    return out
+
+
+def _number(mapping: Mapping[str, Any], key: str, prefix: str, source: str | None,
+            *, low: float, high: float = math.inf, low_open: bool = False) -> float:
+    name = f'{prefix}.{key}'
+    interval = f"{'(' if low_open else '['}{low}, {high}{']' if math.isfinite(high) else ')'}"
+    if key not in mapping:
+        raise ParameterError(name, f'missing; allowed: {interval}', source=source)
+    value = mapping[key]
+    if not isinstance(value, (int, float)) or isinstance(value, bool):
+        raise ParameterError(name, f'got {value!r}; allowed: a number in {interval}',
+                             source=source)
+    v = float(value)
+    if not (math.isfinite(v) and (v > low if low_open else v >= low) and v <= high):
+        raise ParameterError(name, f'got {value!r}; allowed: {interval}', source=source)
+    return v
+
+
+@dataclass(frozen=True)
+class Gains:
+    """Per-DOF gains in the earth frame, order (x, y, z, roll, pitch, yaw).
+
+    kp : N/m, N m/rad; kd : N s/m, N m s/rad; ki : N/(m s), N m/(rad s);
+    integral_limit : bound on |Ki * integral(e)| per DOF [N, N m] (anti-windup).
+    ``ki`` and ``integral_limit`` are used by ``pid`` only.
+    """
+
+    kp: tuple[float, ...]
+    kd: tuple[float, ...]
+    ki: tuple[float, ...] = (0.0,) * 6
+    integral_limit: tuple[float, ...] = (0.0,) * 6
+
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, Any], *, source: str | None = None,
+                     prefix: str = 'gains') -> Gains:
+        kwargs = {key: _vector(values, key, prefix, source) for key in ('kp', 'kd')}
+        for key in ('ki', 'integral_limit'):
+            if key in values:
+                kwargs[key] = _vector(values, key, prefix, source)
+        unknown = set(values) - {'kp', 'kd', 'ki', 'integral_limit'}
+        if unknown:
+            raise ParameterError(f'{prefix}.{sorted(unknown)[0]}',
+                                 'unknown; known: kp, kd, ki, integral_limit', source=source)
+        return cls(**kwargs)
+
+
+@dataclass(frozen=True)
+class SwitchingSettings:
+    """Rule of the switching baseline (see the module docstring).
+
+    hysteresis : the other group's error must exceed (1 + hysteresis) times the
+        current group's to switch [-]
+    dwell_time : least time between two switches [s]
+    position_scale, angle_scale : errors are normalised by these [m], [rad]
+    deadband : normalised error under which no switch happens [-]
+    settle_time : added to the servo travel time before thrust resumes [s]
+    """
+
+    hysteresis: float = 0.5
+    dwell_time: float = 1.0
+    position_scale: float = 0.05
+    angle_scale: float = 0.05
+    deadband: float = 0.2
+    settle_time: float = 0.1
+
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, Any], *, source: str | None = None,
+                     prefix: str = 'switching') -> SwitchingSettings:
+        known = {'hysteresis': (0.0, False), 'dwell_time': (0.0, False),
+                 'position_scale': (0.0, True), 'angle_scale': (0.0, True),
+                 'deadband': (0.0, False), 'settle_time': (0.0, False)}
+        unknown = set(values) - set(known)
+        if unknown:
+            raise ParameterError(f'{prefix}.{sorted(unknown)[0]}',
+                                 f'unknown; known: {sorted(known)}', source=source)
+        kwargs = {key: _number(values, key, prefix, source, low=low, low_open=open_)
+                  for key, (low, open_) in known.items() if key in values}
+        return cls(**kwargs)
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    """Which controller and its tuning: the ``wrench_controller`` parameters."""
+
+    kind: ControllerKind
+    gains: Gains
+    switching: SwitchingSettings = field(default_factory=SwitchingSettings)
+    source: str | None = field(default=None, compare=False, repr=False)
+
+    def with_kind(self, kind: str) -> ControllerConfig:
+        if kind not in CONTROLLER_KINDS:
+            raise ParameterError('controller', f'got {kind!r}; allowed: {CONTROLLER_KINDS}',
+                                 source=self.source)
+        return ControllerConfig(kind, self.gains, self.switching, self.source)  # type: ignore[arg-type]
+
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, Any], *,
+                     source: str | None = None) -> ControllerConfig:
+        """From the ``ros__parameters`` of ``wrench_controller`` (other keys ignored)."""
+        kind = values.get('controller', 'pd')
+        if kind not in CONTROLLER_KINDS:
+            raise ParameterError('controller', f'got {kind!r}; allowed: {CONTROLLER_KINDS}',
+                                 source=source)
+        gains = values.get('gains')
+        if not isinstance(gains, Mapping):
+            raise ParameterError('gains', 'missing; needs kp and kd (6 numbers each)',
+                                 source=source)
+        switching = values.get('switching', {})
+        if not isinstance(switching, Mapping):
+            raise ParameterError('switching', f'got {switching!r}; allowed: a mapping',
+                                 source=source)
+        return cls(kind, Gains.from_mapping(gains, source=source),
+                   SwitchingSettings.from_mapping(switching, source=source), source)
+
+
+def load_controller_config(path: str | Path | None = None) -> ControllerConfig:
+    """Read ``wrench_controller: ros__parameters:`` from a YAML file (default: shipped)."""
+    if path is None:
+        from tiltrov_ros.paths import config_file
+        path = config_file(CONTROLLER_YAML)
+    source = str(path)
+    with Path(path).open(encoding='utf-8') as stream:
+        document = yaml.safe_load(stream)
+    section = document.get('wrench_controller') if isinstance(document, Mapping) else None
+    params = section.get('ros__parameters') if isinstance(section, Mapping) else None
+    if not isinstance(params, Mapping):
+        raise ParameterError('wrench_controller', 'no wrench_controller: ros__parameters: '
+                             'block found', source=source)
+    return ControllerConfig.from_mapping(params, source=source)
+
+
+def make_controller(config: ControllerConfig, robot: RobotParams) -> Controller:
+    """The controller ``config.kind`` names, with ``robot`` as its nominal model."""
+    if config.kind == 'pd':
+        return PDController(config.gains)
+    if config.kind == 'pid':
+        return PIDController(config.gains, robot)
+    return SwitchingController(config.gains, config.switching, robot)
+
+
+# --------------------------------------------------------------------------- the laws
+
+
+@dataclass(frozen=True)
+class TrackingError:
+    """eta, e = eta_d - eta (angles wrapped), e_dot = eta_d_dot - J nu, and J(eta)."""
+
+    eta: FloatArray
+    e: FloatArray
+    e_dot: FloatArray
+    J: FloatArray
+
+
+def tracking_error(position: ArrayLike, quaternion: ArrayLike, nu: ArrayLike,
+                   reference: Reference) -> TrackingError:
+    """The earth-frame errors of eq. (16), from odometry-shaped inputs."""
+    q = quat_normalize(quaternion)
+    q_d = quat_normalize(reference.quaternion)
+    eta = np.concatenate([np.asarray(position, dtype=float), euler_from_quat(q)])
+    eta_d = np.concatenate([np.asarray(reference.position, dtype=float), euler_from_quat(q_d)])
+    e = eta_d - eta
+    e[3:] = ssa(e[3:])
+    # J(eta) is singular at pitch +-90 deg: evaluate it just short of there.
+    eta_j = eta.copy()
+    if abs(math.cos(eta_j[4])) < _GIMBAL_COS:
+        eta_j[4] = math.copysign(math.acos(_GIMBAL_COS), eta_j[4])
+    Jm = J(eta_j)
+    e_dot = np.asarray(reference.velocity, dtype=float) - Jm @ np.asarray(nu, dtype=float)
+    return TrackingError(eta, e, e_dot, Jm)
+
+
+class PDController:
+    """Eq. (16): tau = J(eta)^T (Kp e + Kd e_dot)."""
+
+    def __init__(self, gains: Gains) -> None:
+        self.gains = gains
+        self._kp = np.array(gains.kp)
+        self._kd = np.array(gains.kd)
+
+    def reset(self) -> None:
+        """PD has no state."""
+
+    def update(self, t: float, position: FloatArray, quaternion: FloatArray, nu: FloatArray,
+               reference: Reference) -> ControlOutput:
+        err = tracking_error(position, quaternion, nu, reference)
+        return ControlOutput(err.J.T @ (self._kp * err.e + self._kd * err.e_dot), None, 'pd')
+
+
+class PIDController:
+    """PD (16) + g_hat(eta) + J^T Ki integral(e), with the integral clamped.
+
+    g_hat is the restoring-force vector of the controller's nominal robot (it
+    does not know the center-of-mass error); the integral removes what remains.
+    The integral of each DOF is clamped so that |Ki integral(e)| stays within
+    ``integral_limit`` (clamping anti-windup); it integrates with the time
+    between updates (the control period), never more than 1 s at a time.
+    """
+
+    def __init__(self, gains: Gains, robot: RobotParams) -> None:
+        self.gains = gains
+        self.robot = robot
+        self._kp = np.array(gains.kp)
+        self._kd = np.array(gains.kd)
+        self._ki = np.array(gains.ki)
+        limit = np.array(gains.integral_limit)
+        with np.errstate(divide='ignore', invalid='ignore'):
+            self._max_integral = np.where(self._ki > 0, limit / self._ki, 0.0)
+        self.reset()
+
+    def reset(self) -> None:
+        self.integral = np.zeros(6)
+        self._last_t: float | None = None
+
+    def update(self, t: float, position: FloatArray, quaternion: FloatArray, nu: FloatArray,
+               reference: Reference) -> ControlOutput:
+        err = tracking_error(position, quaternion, nu, reference)
+        if self._last_t is not None:
+            dt = min(max(t - self._last_t, 0.0), 1.0)
+            self.integral = np.clip(self.integral + err.e * dt, -self._max_integral,
+                                    self._max_integral)
+        self._last_t = t
+        g_hat = restoring_forces(self.robot, Rquat(quat_normalize(quaternion)))
+        earth = self._kp * err.e + self._kd * err.e_dot + self._ki * self.integral
+        return ControlOutput(g_hat + err.J.T @ earth, None, 'pid')
+
+
+class SwitchingController:
+    """The selective switching baseline (see the module docstring for the rule)."""
+
+    TILTS: ClassVar[dict[str, tuple[float, float]]] = {
+        'horizontal': (0.0, 0.0), 'vertical': (0.5 * math.pi, 0.5 * math.pi)}
+
+    def __init__(self, gains: Gains, settings: SwitchingSettings, robot: RobotParams) -> None:
+        self.gains = gains
+        self.settings = settings
+        self.robot = robot
+        self._kp = np.array(gains.kp)
+        self._kd = np.array(gains.kd)
+        self.reset()
+
+    def reset(self) -> None:
+        self.mode: str | None = None
+        self.tilts = (0.0, 0.0)            # where the servos were last sent
+        self._switched_at = -math.inf
+        self._moving_until = -math.inf
+        self.switches = 0
+
+    def _group_errors(self, e: FloatArray) -> tuple[float, float]:
+        s = self.settings
+        h = math.sqrt((e[0] / s.position_scale) ** 2 + (e[1] / s.position_scale) ** 2
+                      + (e[5] / s.angle_scale) ** 2)
+        v = math.sqrt((e[2] / s.position_scale) ** 2 + (e[3] / s.angle_scale) ** 2
+                      + (e[4] / s.angle_scale) ** 2)
+        return h, v
+
+    def _switch_to(self, mode: str, t: float) -> None:
+        target = self.TILTS[mode]
+        travel = max(abs(target[0] - self.tilts[0]), abs(target[1] - self.tilts[1]))
+        self._moving_until = t + travel / self.robot.tilt_rate_limit + self.settings.settle_time
+        self._switched_at = t
+        self.tilts = target
+        self.mode = mode
+        self.switches += 1
+
+    def update(self, t: float, position: FloatArray, quaternion: FloatArray, nu: FloatArray,
+               reference: Reference) -> ControlOutput:
+        err = tracking_error(position, quaternion, nu, reference)
+        horizontal, vertical = self._group_errors(err.e)
+        if self.mode is None:
+            # Start where the error is larger; depth and attitude first on a tie.
+            self._switch_to('horizontal' if horizontal > vertical else 'vertical', t)
+        elif t >= self._moving_until and t - self._switched_at >= self.settings.dwell_time:
+            current, other = ((horizontal, vertical) if self.mode == 'horizontal'
+                              else (vertical, horizontal))
+            if (other > self.settings.deadband
+                    and other > (1.0 + self.settings.hysteresis) * current):
+                self._switch_to('vertical' if self.mode == 'horizontal' else 'horizontal', t)
+        if t < self._moving_until:
+            return ControlOutput(np.zeros(6), self.tilts, 'transition')
+        tau = err.J.T @ (self._kp * err.e + self._kd * err.e_dot)
+        mask = _HORIZONTAL if self.mode == 'horizontal' else _VERTICAL
+        return ControlOutput(tau * mask, self.tilts, str(self.mode))
