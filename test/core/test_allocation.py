@@ -485,3 +485,48 @@ def test_property_limits_hold_for_any_input(tau: list[float], prev: tuple[float,
     _assert_within_limits(result, alloc, previous)
     assert result.error == pytest.approx(
         float(np.linalg.norm((result.achieved - np.array(tau)) * np.array(DEFAULT_WEIGHTS))))
+
+
+# ------------------------------------------------------------------------ regressions
+
+
+@pytest.mark.parametrize('mode', MODES)
+@pytest.mark.parametrize(('f', 'alpha', 'beta'), [
+    ([1e-3, 1e-3, 40.0, 40.0], 1e-3, HALF_PI),               # rear pair at the limit, F1
+    ([40.0, 40.0, -25.01957995, -25.01957995], -HALF_PI, -0.03890611161857893),
+    ([40.0, 40.0, -1e-3, 1e-3], HALF_PI, 1e-3),
+])
+def test_exact_solutions_at_the_thrust_limit_on_a_family(mode, f, alpha, beta) -> None:
+    """The least-largest-thrust member of a family is a candidate: solutions whose
+    thrusts sit exactly at the limit are found, not missed between samples."""
+    tau = thrust_wrench(np.array(f), alpha, beta, L, D)
+    result = ThrustAllocator(L, D, FMAX, mode=mode).allocate(tau)
+    assert _rel_error(result, tau) <= 1e-9, result
+
+
+@pytest.mark.parametrize('mode', MODES)
+def test_double_root_with_a_rounding_negative_discriminant(mode: str) -> None:
+    f = np.array([1e-3, 0.0, 0.0, -34.2376891])
+    tau = thrust_wrench(f, 0.8537155260600597, 0.8537155260600597, L, D)
+    result = ThrustAllocator(L, D, FMAX, mode=mode).allocate(tau)
+    assert result.method == 'exact'
+    assert _rel_error(result, tau) <= 1e-9
+
+
+def test_near_degenerate_wrench_is_snapped_to_its_family_in_robust_mode() -> None:
+    """An integrator leaves roll, sway and yaw at rounding level: the exact roots
+    jump far away, the family of the clean wrench is next door."""
+    step = math.radians(7.5)
+    robust = ThrustAllocator(L, D, FMAX, max_tilt_step=step)
+    clean = np.array([0.87, 0.0, 4.92, 0.0, 3.52, 0.0])
+    start = robust.allocate_fixed(np.zeros(6), math.radians(56.3), math.radians(82.9))
+    previous = robust.allocate(clean, start)          # a member of the clean family
+    assert previous.method == 'family' and previous.feasible
+    hairy = clean + np.array([0, 3e-8, 0, 2e-9, 0, -5e-8])
+    exact_roots, _ = robust._candidates(hairy)
+    assert exact_roots and all(np.max(np.abs(c.tilts - previous.tilts)) > step
+                               for c in exact_roots)
+    result = robust.allocate(hairy, previous)
+    assert result.method == 'family' and result.feasible
+    assert np.max(np.abs(result.tilts - previous.tilts)) <= step
+    assert np.linalg.norm(result.achieved - hairy) < 1e-6 * np.linalg.norm(hairy)

@@ -90,7 +90,7 @@ beats it, so the robust error is never worse than the paper mode's.
 
 from __future__ import annotations
 
-from collections.abc import Collection, Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass, replace
 import itertools
 import math
@@ -113,9 +113,17 @@ HALF_PI = 0.5 * math.pi
 #: Default per-DOF weights (X, Y, Z, K, M, N) of the wrench error in robust mode:
 #: depth and attitude first.
 DEFAULT_WEIGHTS = (1.0, 1.0, 10.0, 10.0, 10.0, 1.0)
-#: Relative tolerance under which a wrench counts as produced exactly:
+#: Relative tolerance under which a wrench counts as produced (``feasible``):
 #: ||achieved - requested|| <= FEASIBILITY_RTOL * max(||requested||, max_thrust).
-FEASIBILITY_RTOL = 1e-9
+#: The closed form itself is exact to rounding (tests check 1e-9).
+FEASIBILITY_RTOL = 1e-6
+#: Robust mode: wrench components below this fraction of the largest one may be
+#: read as zero to reach a family of solutions (see ``_snapped_candidates``).
+SNAP_RTOL = 1e-6
+# Slack on a negative discriminant of (**) read as a double root (rounding).
+_DISC_RTOL = 1e-13
+# A candidate of the closed form must reproduce the wrench to this (relative).
+_EXACT_RTOL = 1e-10
 # Relative size under which P, Q, kappa, H count as zero (family detection).
 _FAMILY_RTOL = 1e-12
 # A pair whose components (scaled so that max |tau_i| = 1) are below this has
@@ -279,6 +287,12 @@ class ThrustAllocator:
         else:
             configs, disc = self._candidates(tau)
             result_or_none = self._choose(tau, configs, disc, prev, box)
+            if result_or_none is None and self.mode == 'robust':
+                snapped = self._snapped_candidates(tau)
+                result_or_none = self._choose(tau, snapped, disc, prev, box, strict=False)
+                if result_or_none is not None and not result_or_none.feasible:
+                    result_or_none = None
+                configs = configs + snapped
             if result_or_none is not None:
                 result = result_or_none
             else:
@@ -442,7 +456,10 @@ class ThrustAllocator:
         a, b, c = H, -(P + Q + kappa * H), kappa * P
         disc = b * b - 4.0 * a * c
         roots: list[float] = []
-        if disc >= -1e-14 * max(b * b, abs(4.0 * a * c)):
+        # Rounding in b comes from cancelling P + Q + kappa H, so the slack on
+        # the discriminant scales with those terms, not with b^2 alone.
+        slack = _DISC_RTOL * (abs(b) * (abs(P) + abs(Q) + abs(kappa * H)) + abs(4.0 * a * c))
+        if disc >= -slack:
             sq = math.sqrt(max(disc, 0.0))
             qq = -0.5 * (b + (sq if b >= 0 else -sq))
             if a != 0.0:
@@ -477,6 +494,22 @@ class ThrustAllocator:
             configs.append(_Config(thrusts, np.array([alpha, beta]), False, (free_f, free_r)))
         return configs, disc
 
+    def _snapped_candidates(self, tau: FloatArray) -> list[_Config]:
+        """Exact candidates of tau with its tiny components (< SNAP_RTOL) set to zero.
+
+        A wrench a hair away from a degenerate one (roll moment, sway and yaw
+        at rounding level, as an integrator makes them) has only discrete
+        solutions, ill-conditioned and far apart; the family of the wrench
+        without those hairs is next to it. Robust mode only, and only taken when
+        the true error of a candidate is within the feasibility tolerance.
+        """
+        peak = float(np.max(np.abs(tau)))
+        snapped = np.where(np.abs(tau) <= SNAP_RTOL * peak, 0.0, tau)
+        if np.array_equal(snapped, tau):
+            return []
+        configs, _ = self._candidates(snapped)
+        return configs
+
     def _configs_from_batch(self, tau: FloatArray) -> list[_Config]:
         solved = _solve_batch(tau[None, :], self.length, self.width, self._k)
         return [_Config(solved.thrusts[0, j], solved.tilts[0, j], bool(solved.family[0, j]),
@@ -507,12 +540,16 @@ class ThrustAllocator:
                 for (alpha, s_f), (beta, s_r) in itertools.product(*per_pair)]
 
     def _choose(self, tau: FloatArray, configs: list[_Config], disc: float,
-                prev: FloatArray | None, box: FloatArray) -> AllocationResult | None:
+                prev: FloatArray | None, box: FloatArray,
+                strict: bool = True) -> AllocationResult | None:
         """The exact candidate the rule of Section 3.2 picks among those that qualify.
 
         Qualify: thrusts within the limit, tilts within the range and, in robust
         mode, within ``max_tilt_step`` of ``previous``. Paper mode then clips the
         tilts to ``max_tilt_step`` (losing exactness, reported as 'saturated').
+        ``strict``: the pick must reproduce the wrench to rounding (the residual
+        of (*) can hide an amplified error in nearly degenerate cases); a pick
+        that does not is dropped and the next one taken.
         Plain floats: this is the hot path of every control cycle.
         """
         ref0, ref1 = (float(prev[0]), float(prev[1])) if prev is not None else (0.0, 0.0)
@@ -524,7 +561,7 @@ class ThrustAllocator:
         else:
             lo0 = lo1 = lo - _LIMIT_SLACK
             hi0 = hi1 = hi + _LIMIT_SLACK
-        best = None
+        ranked = []
         for cfg in configs:
             for f, (a, b) in self._variants(cfg, prev, box):
                 if max(abs(f[0]), abs(f[1]), abs(f[2]), abs(f[3])) > fmax:
@@ -534,18 +571,22 @@ class ThrustAllocator:
                 move = (a - ref0) ** 2 + (b - ref1) ** 2
                 thrust2 = f[0] * f[0] + f[1] * f[1] + f[2] * f[2] + f[3] * f[3]
                 key = (thrust2, move, 0.0) if cfg.family else (0.0, move, thrust2)
-                if best is None or key < best[0]:
-                    best = (key, f, a, b, cfg.family)
-        if best is None:
-            return None
-        _, f, a, b, family = best
-        a, b = min(max(a, lo), hi), min(max(b, lo), hi)
-        method = 'zero' if not any(f) else ('family' if family else 'exact')
-        ca = min(max(a, float(box[0, 0])), float(box[0, 1]))
-        cb = min(max(b, float(box[1, 0])), float(box[1, 1]))
-        if (ca, cb) != (a, b):                   # paper mode only
-            method, a, b = 'saturated', ca, cb
-        return self._make(tau, np.array(f), np.array([a, b]), method, disc)
+                ranked.append((key, f, a, b, cfg.family))
+        ranked.sort(key=lambda item: item[0])
+        exact_tol = _EXACT_RTOL * _norm(tau)
+        for _, f, a, b, family in ranked:
+            a, b = min(max(a, lo), hi), min(max(b, lo), hi)
+            result = self._make(tau, np.array(f), np.array([a, b]),
+                                'zero' if not any(f) else ('family' if family else 'exact'),
+                                disc)
+            if strict and _norm(result.achieved - tau) > exact_tol:
+                continue
+            ca = min(max(a, float(box[0, 0])), float(box[0, 1]))
+            cb = min(max(b, float(box[1, 0])), float(box[1, 1]))
+            if (ca, cb) != (a, b):                   # paper mode only
+                result = self._make(tau, np.array(f), np.array([ca, cb]), 'saturated', disc)
+            return result
+        return None
 
     def _paper_fallback(self, tau: FloatArray, configs: list[_Config], disc: float,
                         prev: FloatArray | None, box: FloatArray) -> AllocationResult:
@@ -872,7 +913,9 @@ def _solve_batch(tau: FloatArray, length: float, width: float, k: float) -> _Sol
     # Roots of (**), a U^2 + b U + c = 0, in the cancellation-free form.
     a, b, c = H, -(P + Q + kappa * H), kappa * P
     disc = b * b - 4 * a * c
-    real = disc >= -1e-14 * np.maximum(b * b, np.abs(4 * a * c))
+    slack = _DISC_RTOL * (np.abs(b) * (np.abs(P) + np.abs(Q) + np.abs(kappa * H))
+                          + np.abs(4 * a * c))
+    real = disc >= -slack
     sq = np.sqrt(np.maximum(disc, 0.0))
     qq = -0.5 * (b + np.where(b >= 0, sq, -sq))
     with np.errstate(divide='ignore', invalid='ignore'):
@@ -888,7 +931,7 @@ def _solve_batch(tau: FloatArray, length: float, width: float, k: float) -> _Sol
     V = np.where(np.abs(U) >= np.abs(U - kappa[:, None]), v_p, v_q)
     family = np.zeros(U.shape, dtype=bool)
     if np.any(any_family):
-        fu, fv = _family_samples(fam1, fam2, fam3, H, kappa, P, mag)
+        fu, fv = _family_samples(fam1, fam2, fam3, (Zf, Zr, Df, Dr, kappa, H), P, mag)
         U = np.concatenate([U, fu], axis=1)
         V = np.concatenate([V, fv], axis=1)
         family = np.concatenate([family, np.ones(fu.shape, dtype=bool)], axis=1)
@@ -906,6 +949,11 @@ def _solve_batch(tau: FloatArray, length: float, width: float, k: float) -> _Sol
     h = 0.5 * np.stack([V + Df[:, None], V - Df[:, None],
                         HH - V + Dr[:, None], HH - V - Dr[:, None]], axis=2)
     thrusts, tilts, free = _pairs_to_actuators(z, h)
+    # Verify every candidate on eq. (4) (scaled units): (*) can hide an amplified error.
+    unit = tau / s[:, None]
+    achieved = thrust_wrench(thrusts, tilts[..., 0], tilts[..., 1], length, width)
+    error = np.linalg.norm(achieved - unit[:, None, :], axis=2)
+    valid &= error <= _EXACT_RTOL * np.linalg.norm(unit, axis=1)[:, None]
     # The zero wrench: everything is zero and both tilts are free.
     zero_row = peak == 0
     valid[zero_row, 1:] = False
@@ -918,28 +966,79 @@ def _solve_batch(tau: FloatArray, length: float, width: float, k: float) -> _Sol
                    np.where(any_family | zero_row, np.nan, disc))
 
 
-def _family_samples(fam1: BoolArray, fam2: BoolArray, fam3: BoolArray, H: FloatArray,
-                    kappa: FloatArray, P: FloatArray,
+def _max_thrust_f1(V: FloatArray, g: tuple[FloatArray, ...]) -> FloatArray:
+    """Largest thruster force on family F1 (U = 0) at V, up to the factor 1/2."""
+    Zf, Zr, Df, Dr, kappa, H = g
+    out: FloatArray = np.maximum.reduce([np.hypot(Zf, V + Df), np.hypot(Zf, V - Df),
+                                         np.hypot(Zr - kappa, H - V + Dr),
+                                         np.hypot(Zr + kappa, H - V - Dr)])
+    return out
+
+
+def _max_thrust_f2(U: FloatArray, g: tuple[FloatArray, ...]) -> FloatArray:
+    """Largest thruster force on family F2 (V = 0) at U, up to the factor 1/2."""
+    Zf, Zr, Df, Dr, kappa, H = g
+    out: FloatArray = np.maximum.reduce([np.hypot(Zf + U, Df), np.hypot(Zf - U, Df),
+                                         np.hypot(Zr + U - kappa, H + Dr),
+                                         np.hypot(Zr - U + kappa, H - Dr)])
+    return out
+
+
+def _argmin_convex(fun: Callable[[FloatArray], FloatArray], lo: FloatArray,
+                   hi: FloatArray, iterations: int = 80) -> FloatArray:
+    """Golden-section minimum of a convex function of one variable, per row."""
+    r = (math.sqrt(5.0) - 1.0) / 2.0
+    a, b = lo.copy(), hi.copy()
+    c, d = b - r * (b - a), a + r * (b - a)
+    fc, fd = fun(c), fun(d)
+    for _ in range(iterations):
+        left = fc <= fd
+        b = np.where(left, d, b)
+        a = np.where(left, a, c)
+        c_new, d_new = b - r * (b - a), a + r * (b - a)
+        c, d = np.where(left, c_new, d), np.where(left, c, d_new)
+        fc, fd = np.where(left, fun(c), fd), np.where(left, fc, fun(d))
+    return 0.5 * (a + b)
+
+
+def _family_samples(fam1: BoolArray, fam2: BoolArray, fam3: BoolArray,
+                    geometry: tuple[FloatArray, ...], P: FloatArray,
                     mag: FloatArray) -> tuple[FloatArray, FloatArray]:
     """(U, V) samples along the one-parameter families, NaN where a row has none.
 
-    Spread around each family's least-thrust member, which is included:
-    F1 (U = 0): V = H/2; F2 (V = 0): U = kappa/2; F3 (V = P/U): U = +-sqrt|P|.
+    Spread around each family's least-thrust member, which is included
+    (F1, U = 0: V = H/2; F2, V = 0: U = kappa/2; F3, V = P/U: U = +-sqrt|P|),
+    plus, for F1 and F2, the points where one pair has no horizontal
+    (vertical-difference) part and the member whose largest thruster force is
+    least: the largest force is convex along F1 and F2, so if any member is
+    within the thrust limit, that one is.
     """
+    Zf, Zr, Df, Dr, kappa, H = geometry
     n, s = len(H), _FAMILY_SAMPLES
     spread = mag[:, None] * np.tan(np.linspace(-1.5, 1.5, s))[None, :]
-    nan = np.full((n, s), np.nan)
+    reach = (np.abs(Zf) + np.abs(Zr) + np.abs(Df) + np.abs(Dr) + np.abs(kappa)
+             + np.abs(H) + mag)
+    with np.errstate(invalid='ignore'):
+        v_best = _argmin_convex(lambda v: _max_thrust_f1(v, geometry), -reach, reach)
+        u_best = _argmin_convex(lambda u: _max_thrust_f2(u, geometry), -reach, reach)
+    f1_v = np.concatenate([0.5 * H[:, None] + spread,
+                           np.stack([np.zeros(n), H, v_best], axis=1)], axis=1)
+    f2_u = np.concatenate([0.5 * kappa[:, None] + spread,
+                           np.stack([np.zeros(n), kappa, u_best], axis=1)], axis=1)
+    m = f1_v.shape[1]
+    nan = np.full((n, m), np.nan)
     f1_u = np.where(fam1[:, None], 0.0, nan)
-    f1_v = np.where(fam1[:, None], 0.5 * H[:, None] + spread, nan)
-    f2_u = np.where(fam2[:, None], 0.5 * kappa[:, None] + spread, nan)
+    f1_v = np.where(fam1[:, None], f1_v, nan)
+    f2_u = np.where(fam2[:, None], f2_u, nan)
     f2_v = np.where(fam2[:, None], 0.0, nan)
     half = (s + 1) // 2
     ratio = np.exp(np.linspace(-3.0, 3.0, half))
     sign = np.concatenate([np.ones(half), -np.ones(s - half)])
     ratio = np.concatenate([ratio, ratio[: s - half]])
-    u3 = np.where(fam3[:, None], sign * np.sqrt(np.abs(P))[:, None] * ratio, nan)
+    u3 = np.where(fam3[:, None], sign * np.sqrt(np.abs(P))[:, None] * ratio,
+                  np.full((n, s), np.nan))
     with np.errstate(divide='ignore', invalid='ignore'):
-        v3 = np.where(fam3[:, None], P[:, None] / u3, nan)
+        v3 = np.where(fam3[:, None], P[:, None] / u3, np.nan)
     return (np.concatenate([f1_u, f2_u, u3], axis=1),
             np.concatenate([f1_v, f2_v, v3], axis=1))
 

@@ -1,0 +1,247 @@
+"""The headless closed loop: plant at 10 ms, controller and allocator at 50 ms (ZOH).
+
+This is the paper's set-up (Section 4: sampling time 10 ms, control cycle
+50 ms) and exactly what the ROS stack does in lockstep (ARCHITECTURE.md, "Time
+and stamps" and "Controller interface"), without messages:
+
+* plant step i is at t_i = i h (integer ns); control ticks are the steps with
+  t_i a multiple of the control period T (a multiple of h);
+* at a tick, with the plant state stamped t_i (after the step that ended at
+  t_i)::
+
+      reference = reference_fn(t_i)     # (position (3), quaternion (4), velocity (6))
+      out = controller.update(t_i, position, quaternion, nu, reference)
+      if out.tilt_request is None:
+          res = allocator.allocate(out.wrench, previous=prev_res)
+      else:
+          res = allocator.allocate_fixed(out.wrench, tilt_front, tilt_rear, previous=prev_res)
+      plant.command(res.thrusts, (res.tilt_front, res.tilt_rear))   # held until the next tick
+
+  then the plant steps. t_i is passed as float seconds, ``seconds(t_ns)``, as
+  the nodes do;
+* the :class:`~tiltrov_ros.core.runlog.RunLog` gets one plant row per step
+  including t = 0 (N + 1 rows for N steps) and one control row per tick, ticks
+  at t_i < duration (the commands of a row are in force over [t_i, t_i + T)).
+
+The controller and allocator are anything with the methods of
+:class:`ControllerLike` and :class:`AllocatorLike` (``core/controllers.py`` and
+``core/allocation.py``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+import math
+from typing import Any, NamedTuple, Protocol
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from tiltrov_ros.core.errors import ParameterError
+from tiltrov_ros.core.plant import Plant, PlantSample
+from tiltrov_ros.core.runlog import RunLog
+from tiltrov_ros.core.timebase import seconds, to_ns
+
+FloatArray = NDArray[np.float64]
+
+#: The paper's control cycle (Section 4), ns.
+DEFAULT_CONTROL_PERIOD_NS = 50_000_000
+
+
+class Reference(NamedTuple):
+    """What the ``setpoint`` and ``setpoint_velocity`` messages carry at a tick."""
+
+    position: FloatArray      # (3,) m, eta_d position in NED
+    quaternion: FloatArray    # (4,) (w, x, y, z), eta_d attitude
+    velocity: FloatArray      # (6,) d(eta_d)/dt: (x y z) rates, (roll pitch yaw) rates
+
+
+ReferenceFn = Callable[[float], tuple[ArrayLike, ArrayLike, ArrayLike]]
+
+
+class ControlOutputLike(Protocol):
+    """What ``controller.update`` returns."""
+
+    @property
+    def wrench(self) -> ArrayLike:
+        """(6,) body wrench (X Y Z K M N), N and N m."""
+
+    @property
+    def tilt_request(self) -> Any:
+        """None, or (tilt_front, tilt_rear), rad, for fixed-tilt allocation."""
+
+
+class ControllerLike(Protocol):
+    def update(self, t: float, position: FloatArray, quaternion: FloatArray, nu: FloatArray,
+               reference: Any, /) -> ControlOutputLike:
+        """The wrench for the state at time t (s) and the reference at t."""
+
+
+class AllocationResultLike(Protocol):
+    """What the allocator returns (``ThrustAllocator`` results)."""
+
+    @property
+    def thrusts(self) -> ArrayLike:
+        """(4,) N."""
+
+    @property
+    def tilt_front(self) -> float:
+        """alpha, rad."""
+
+    @property
+    def tilt_rear(self) -> float:
+        """beta, rad."""
+
+    @property
+    def achieved(self) -> ArrayLike:
+        """(6,) eq. (4) of thrusts and tilts."""
+
+    @property
+    def feasible(self) -> bool:
+        """True when achieved == wrench."""
+
+
+class AllocatorLike(Protocol):
+    def allocate(self, wrench: FloatArray, /, previous: Any = None) -> AllocationResultLike:
+        """Thrusts and tilts for a wrench."""
+
+    def allocate_fixed(self, wrench: FloatArray, tilt_front: float, tilt_rear: float, /,
+                       previous: Any = None) -> AllocationResultLike:
+        """Thrusts for a wrench at given tilts."""
+
+
+def _vector(value: ArrayLike, n: int, what: str) -> FloatArray:
+    """A float copy of ``value`` (so a caller reusing its arrays cannot alter the log)."""
+    arr = np.array(value, dtype=float)
+    if arr.shape != (n,):
+        raise ValueError(f'{what}: expected shape ({n},), got {arr.shape}')
+    return arr
+
+
+def run(plant: Plant, controller: ControllerLike, allocator: AllocatorLike,
+        reference_fn: ReferenceFn, duration: float, *,
+        control_period_ns: int = DEFAULT_CONTROL_PERIOD_NS,
+        progress: Callable[[float], None] | None = None,
+        meta: Mapping[str, Any] | None = None) -> RunLog:
+    """Run the closed loop for ``duration`` seconds from the plant's present state.
+
+    Parameters
+    ----------
+    plant : Plant
+        Stepped in place; its time must lie on the control grid (usually 0).
+    controller, allocator
+        See :class:`ControllerLike`, :class:`AllocatorLike`.
+    reference_fn : callable
+        t (s) -> (position (3), quaternion (w, x, y, z) (4), d(eta_d)/dt (6)).
+    duration : float
+        s; a whole number of plant steps.
+    control_period_ns : int
+        Control period T, ns; a whole number of plant steps (default 50 ms).
+    progress : callable, optional
+        Called with the fraction done (0 < f <= 1) about a hundred times, and
+        with 1.0 at the end.
+    meta : mapping, optional
+        Added to the RunLog's meta (scenario, controller name, ...).
+
+    Returns
+    -------
+    RunLog
+    """
+    h_ns = plant.step_ns
+    duration_ns = to_ns(duration)
+    if duration_ns <= 0 or duration_ns % h_ns:
+        raise ParameterError('duration', f'got {duration!r} s; allowed: a positive whole '
+                             f'number of plant steps ({seconds(h_ns)!r} s)')
+    if (isinstance(control_period_ns, bool) or not isinstance(control_period_ns, int)
+            or control_period_ns <= 0 or control_period_ns % h_ns):
+        raise ParameterError('control_period_ns', f'got {control_period_ns!r}; allowed: a '
+                             f'positive whole multiple of the plant step ({h_ns} ns)')
+    if plant.time_ns % control_period_ns:
+        raise ParameterError('plant.time_ns', f'got {plant.time_ns}; allowed: a multiple '
+                             f'of the control period ({control_period_ns} ns)')
+    n_steps = duration_ns // h_ns
+    ticks_every = control_period_ns // h_ns
+    report_every = max(1, n_steps // 100)
+
+    samples: list[PlantSample] = [plant.sample()]
+    rows: dict[str, list[Any]] = {name: [] for name in (
+        'tc', 'setpoint_position', 'setpoint_quaternion', 'setpoint_velocity', 'wrench_cmd',
+        'thrust_cmd', 'tilt_cmd', 'wrench_achieved')}
+    infeasible = 0
+    previous: Any = None
+    for i in range(n_steps):
+        if i % ticks_every == 0:
+            t = seconds(plant.time_ns)
+            p, q, v = reference_fn(t)
+            reference = Reference(_vector(p, 3, 'reference position'),
+                                  _vector(q, 4, 'reference quaternion'),
+                                  _vector(v, 6, 'reference velocity'))
+            out = controller.update(t, plant.position, plant.quaternion, plant.nu, reference)
+            wrench = _vector(out.wrench, 6, 'controller wrench')
+            request = out.tilt_request
+            if request is None:
+                result = allocator.allocate(wrench, previous=previous)
+            else:
+                tilt_front, tilt_rear = request
+                result = allocator.allocate_fixed(wrench, float(tilt_front), float(tilt_rear),
+                                                  previous=previous)
+            previous = result
+            thrusts = _vector(result.thrusts, 4, 'allocated thrusts')
+            tilts = (float(result.tilt_front), float(result.tilt_rear))
+            plant.command(thrusts, tilts)
+            infeasible += not result.feasible
+            rows['tc'].append(t)
+            rows['setpoint_position'].append(reference.position)
+            rows['setpoint_quaternion'].append(reference.quaternion)
+            rows['setpoint_velocity'].append(reference.velocity)
+            rows['wrench_cmd'].append(wrench)
+            rows['thrust_cmd'].append(thrusts)
+            rows['tilt_cmd'].append(tilts)
+            rows['wrench_achieved'].append(_vector(result.achieved, 6, 'achieved wrench'))
+        plant.step()
+        samples.append(plant.sample())
+        if progress is not None and (i + 1) % report_every == 0 and i + 1 < n_steps:
+            progress((i + 1) / n_steps)
+    if progress is not None:
+        progress(1.0)
+
+    run_meta: dict[str, Any] = dict(plant.describe())
+    run_meta.update(control_period=seconds(control_period_ns), duration=seconds(duration_ns),
+                    infeasible_ticks=infeasible,
+                    rejected_thrust_commands=plant.thrusters.rejected,
+                    rejected_tilt_commands=plant.servos.rejected)
+    run_meta.update(meta or {})
+    return _runlog(samples, rows, run_meta)
+
+
+def _runlog(samples: list[PlantSample], rows: dict[str, list[Any]],
+            meta: dict[str, Any]) -> RunLog:
+    plant_cols = list(zip(*samples))
+    arrays: dict[str, Any] = {
+        't': np.array([seconds(t) for t in plant_cols[0]]),
+        'position': np.array(plant_cols[1]),
+        'quaternion': np.array(plant_cols[2]),
+        'nu': np.array(plant_cols[3]),
+        'tilt_position': np.array(plant_cols[4]),
+        'tilt_velocity': np.array(plant_cols[5]),
+        'thrust': np.array(plant_cols[6]),
+    }
+    for name, values in rows.items():
+        arrays[name] = np.array(values, dtype=float)
+    return RunLog(**arrays, meta=meta)
+
+
+def hold_reference(position: ArrayLike = (0.0, 0.0, 0.0),
+                   quaternion: ArrayLike = (1.0, 0.0, 0.0, 0.0)) -> ReferenceFn:
+    """A constant setpoint with zero feed-forward: ``reference_fn`` for station keeping."""
+    p = _vector(position, 3, 'position')
+    q = _vector(quaternion, 4, 'quaternion')
+    if not (np.all(np.isfinite(p)) and np.all(np.isfinite(q))
+            and math.isclose(float(np.linalg.norm(q)), 1.0, rel_tol=1e-9)):
+        raise ValueError('hold_reference: finite position and a unit quaternion expected')
+    v = np.zeros(6)
+
+    def reference(t: float) -> tuple[FloatArray, FloatArray, FloatArray]:
+        return p, q, v
+
+    return reference
