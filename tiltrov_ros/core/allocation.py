@@ -90,7 +90,7 @@ beats it, so the robust error is never worse than the paper mode's.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Collection, Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass, replace
 import itertools
 import math
@@ -966,39 +966,26 @@ def _solve_batch(tau: FloatArray, length: float, width: float, k: float) -> _Sol
                    np.where(any_family | zero_row, np.nan, disc))
 
 
-def _max_thrust_f1(V: FloatArray, g: tuple[FloatArray, ...]) -> FloatArray:
-    """Largest thruster force on family F1 (U = 0) at V, up to the factor 1/2."""
-    Zf, Zr, Df, Dr, kappa, H = g
-    out: FloatArray = np.maximum.reduce([np.hypot(Zf, V + Df), np.hypot(Zf, V - Df),
-                                         np.hypot(Zr - kappa, H - V + Dr),
-                                         np.hypot(Zr + kappa, H - V - Dr)])
-    return out
+def _kink_points(fixed: FloatArray, slope: FloatArray, offset: FloatArray) -> FloatArray:
+    """Where the largest of sqrt(a_i^2 + (s_i t / 2 + c_i)^2) over i can be least, per row.
 
-
-def _max_thrust_f2(U: FloatArray, g: tuple[FloatArray, ...]) -> FloatArray:
-    """Largest thruster force on family F2 (V = 0) at U, up to the factor 1/2."""
-    Zf, Zr, Df, Dr, kappa, H = g
-    out: FloatArray = np.maximum.reduce([np.hypot(Zf + U, Df), np.hypot(Zf - U, Df),
-                                         np.hypot(Zr + U - kappa, H + Dr),
-                                         np.hypot(Zr - U + kappa, H - Dr)])
-    return out
-
-
-def _argmin_convex(fun: Callable[[FloatArray], FloatArray], lo: FloatArray,
-                   hi: FloatArray, iterations: int = 80) -> FloatArray:
-    """Golden-section minimum of a convex function of one variable, per row."""
-    r = (math.sqrt(5.0) - 1.0) / 2.0
-    a, b = lo.copy(), hi.copy()
-    c, d = b - r * (b - a), a + r * (b - a)
-    fc, fd = fun(c), fun(d)
-    for _ in range(iterations):
-        left = fc <= fd
-        b = np.where(left, d, b)
-        a = np.where(left, a, c)
-        c_new, d_new = b - r * (b - a), a + r * (b - a)
-        c, d = np.where(left, c_new, d), np.where(left, c, d_new)
-        fc, fd = np.where(left, fun(c), fd), np.where(left, fc, fun(d))
-    return 0.5 * (a + b)
+    Along families F1 and F2 each thruster's force is sqrt(a_i^2 + (s_i t/2 + c_i)^2)
+    with s_i = +-1: the squares share their leading coefficient, so two of them
+    are equal where a *linear* equation holds. The minimiser of the largest
+    force is where one term is least (s_i t/2 + c_i = 0) or two are equal:
+    4 + 6 points, given here (n, 10) (NaN where two terms never meet).
+    fixed, slope, offset: (n, 4) each.
+    """
+    points = [-2.0 * offset[:, i] / slope[:, i] for i in range(4)]
+    for i, j in itertools.combinations(range(4), 2):
+        num = (fixed[:, j] ** 2 + offset[:, j] ** 2) - (fixed[:, i] ** 2 + offset[:, i] ** 2)
+        den = slope[:, i] * offset[:, i] - slope[:, j] * offset[:, j]
+        with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
+            points.append(np.where(den != 0, num / den, np.nan))
+    out = np.stack(points, axis=1)
+    # A point beyond any sensible scale (a denominator at rounding level) is
+    # useless and would overflow later: drop it.
+    return np.where(np.abs(out) < 1e150, out, np.nan)
 
 
 def _family_samples(fam1: BoolArray, fam2: BoolArray, fam3: BoolArray,
@@ -1008,23 +995,24 @@ def _family_samples(fam1: BoolArray, fam2: BoolArray, fam3: BoolArray,
 
     Spread around each family's least-thrust member, which is included
     (F1, U = 0: V = H/2; F2, V = 0: U = kappa/2; F3, V = P/U: U = +-sqrt|P|),
-    plus, for F1 and F2, the points where one pair has no horizontal
-    (vertical-difference) part and the member whose largest thruster force is
-    least: the largest force is convex along F1 and F2, so if any member is
-    within the thrust limit, that one is.
+    plus, for F1 and F2, the candidates for the member whose largest thruster
+    force is least (:func:`_kink_points`): if any member is within the thrust
+    limit, that one is, so solutions at the limit are not missed.
     """
     Zf, Zr, Df, Dr, kappa, H = geometry
     n, s = len(H), _FAMILY_SAMPLES
     spread = mag[:, None] * np.tan(np.linspace(-1.5, 1.5, s))[None, :]
-    reach = (np.abs(Zf) + np.abs(Zr) + np.abs(Df) + np.abs(Dr) + np.abs(kappa)
-             + np.abs(H) + mag)
-    with np.errstate(invalid='ignore'):
-        v_best = _argmin_convex(lambda v: _max_thrust_f1(v, geometry), -reach, reach)
-        u_best = _argmin_convex(lambda u: _max_thrust_f2(u, geometry), -reach, reach)
-    f1_v = np.concatenate([0.5 * H[:, None] + spread,
-                           np.stack([np.zeros(n), H, v_best], axis=1)], axis=1)
-    f2_u = np.concatenate([0.5 * kappa[:, None] + spread,
-                           np.stack([np.zeros(n), kappa, u_best], axis=1)], axis=1)
+    ones = np.ones(n)
+    # F1 (U = 0): z fixed, h_i = s_i V/2 + c_i.
+    f1_kinks = _kink_points(0.5 * np.stack([Zf, Zf, Zr - kappa, Zr + kappa], axis=1),
+                            np.stack([ones, ones, -ones, -ones], axis=1),
+                            0.5 * np.stack([Df, -Df, H + Dr, H - Dr], axis=1))
+    # F2 (V = 0): h fixed, z_i = s_i U/2 + c_i.
+    f2_kinks = _kink_points(0.5 * np.stack([Df, -Df, H + Dr, H - Dr], axis=1),
+                            np.stack([ones, -ones, ones, -ones], axis=1),
+                            0.5 * np.stack([Zf, Zf, Zr - kappa, Zr + kappa], axis=1))
+    f1_v = np.concatenate([0.5 * H[:, None] + spread, f1_kinks], axis=1)
+    f2_u = np.concatenate([0.5 * kappa[:, None] + spread, f2_kinks], axis=1)
     m = f1_v.shape[1]
     nan = np.full((n, m), np.nan)
     f1_u = np.where(fam1[:, None], 0.0, nan)
