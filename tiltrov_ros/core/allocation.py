@@ -662,13 +662,19 @@ class ThrustAllocator:
         points.extend(lo + (hi - lo) * np.array([a, b]) for a in grid for b in grid)
         cand = np.unique(np.array(points), axis=0)
         thrusts, cost = self._thrusts_for_tilts(tau, cand)
-        order = np.argsort(cost, kind='stable')[:3]
+        order = np.argsort(cost, kind='stable')
         best_f, best_t, best_c = thrusts[order[0]], cand[order[0]], float(cost[order[0]])
-        for k in order:
-            _, t = self._levenberg_marquardt(tau, thrusts[k], cand[k], box)
-            f_exact, c_exact = self._thrusts_for_tilts(tau, t[None, :])
-            if c_exact[0] < best_c:
-                best_f, best_t, best_c = f_exact[0], t, float(c_exact[0])
+        # Scaled units (see _error_weights): cost is the squared weighted error
+        # divided by max(|tau|, fmax)^2. A start already this good needs no search.
+        good_enough = (0.01 * FEASIBILITY_RTOL) ** 2
+        if best_c > good_enough:
+            for k in order[:2]:
+                _, t = self._levenberg_marquardt(tau, thrusts[k], cand[k], box)
+                f_exact, c_exact = self._thrusts_for_tilts(tau, t[None, :])
+                if c_exact[0] < best_c:
+                    best_f, best_t, best_c = f_exact[0], t, float(c_exact[0])
+                if best_c <= good_enough:
+                    break
         result = self._make(tau, best_f, best_t, 'optimized', math.nan)
         if incumbent is not None and incumbent.error <= result.error:
             return incumbent
