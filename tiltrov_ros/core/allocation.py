@@ -80,11 +80,11 @@ Exact whenever an exact solution qualifies: then the same answer as the
 paper mode. When none does (negative discriminant, thrust beyond the limit,
 tilts out of range or out of reach), it returns the attainable configuration
 with the least weighted wrench error ||W (tau(f, alpha, beta) - tau_d)||: from
-warm starts (the closed-form candidates and the paper mode's answer, clipped
-into reach, the previous tilts, a coarse grid), a projected Levenberg-Marquardt
-iteration over the four thrusts and two tilts, with the thrusts finally
-re-solved exactly for the tilts found (a box-constrained linear least-squares
-problem, :func:`_bounded_lstsq`). The paper mode's answer is kept if nothing
+warm starts (the closed-form candidates and the paper mode's answer brought
+into reach, the previous tilts, a coarse grid), a damped Gauss-Newton search
+over the two tilts in which the thrusts are always the exact solution of a
+box-constrained linear least-squares problem (:func:`_bounded_lstsq`), the
+variable projection. The paper mode's answer is kept if nothing
 beats it, so the robust error is never worse than the paper mode's.
 """
 
@@ -321,7 +321,7 @@ class ThrustAllocator:
         keep = prev if prev is not None else np.zeros(2)
         request = np.where(np.isfinite(request), request, keep)
         tilts = np.clip(request, box[:, 0], box[:, 1])
-        thrusts, _ = self._thrusts_for_tilts(tau, tilts[None, :])
+        thrusts, _, _ = self._thrusts_for_tilts(tau, tilts[None, :])
         result = self._make(tau, thrusts[0], tilts, 'fixed_tilt', math.nan)
         return self._finish(result, finite)
 
@@ -625,23 +625,18 @@ class ThrustAllocator:
 
     # ------------------------------------------------------------------ robust fallback
 
-    def _columns(self, tilts: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """Eq. (4) columns b_i(tilt) (6, 4) and their tilt derivatives."""
-        gamma = tilts[[0, 0, 1, 1]]
-        s, c = np.sin(gamma), np.cos(gamma)
-        return self._Az * s + self._Ah * c, self._Az * c - self._Ah * s
-
     def _error_weights(self, tau: FloatArray) -> FloatArray:
         """Weights divided by the request's size: the same minimiser, no overflow."""
         size = max(float(np.max(np.abs(tau))), self.max_thrust)
         weights: FloatArray = self.weights / size
         return weights
 
-    def _thrusts_for_tilts(self, tau: FloatArray,
-                           tilts: FloatArray) -> tuple[FloatArray, FloatArray]:
+    def _thrusts_for_tilts(self, tau: FloatArray, tilts: FloatArray
+                           ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Box-constrained weighted least-squares thrusts for each row of tilts (m, 2).
 
-        Returns thrusts (m, 4) and the (scaled) weighted squared wrench errors (m,).
+        Returns thrusts (m, 4), the (scaled) weighted residuals (m, 6) and their
+        squared norms (m,) (scaled units: see :meth:`_error_weights`).
         """
         w = self._error_weights(tau)
         gamma = tilts[:, [0, 0, 1, 1]]                              # (m, 4)
@@ -650,87 +645,95 @@ class ThrustAllocator:
         upper = np.where(self._available, self.max_thrust, 0.0)
         return _bounded_lstsq(B, tau * w, -upper, upper)
 
+    def _nearest_in_box(self, tilts: FloatArray, box: FloatArray) -> FloatArray:
+        """Per tilt, of gamma and gamma +- pi (the same thrust line), the one
+        nearest to the reachable box, clipped into it: a warm start."""
+        out = np.empty(2)
+        for p in range(2):
+            options = np.float64(tilts[p]) + np.array([0.0, math.pi, -math.pi])
+            clipped = np.clip(options, box[p, 0], box[p, 1])
+            out[p] = clipped[int(np.argmin(np.abs(options - clipped)))]
+        return out
+
     def _optimize(self, tau: FloatArray, prev: FloatArray | None, box: FloatArray,
                   starts: list[FloatArray],
                   incumbent: AllocationResult | None) -> AllocationResult:
-        """Least weighted wrench error over the thrusts and the reachable tilts."""
+        """Least weighted wrench error over the thrusts and the reachable tilts.
+
+        Stage 1: the warm starts (closed-form candidates and the paper mode's
+        answer brought into reach, the previous tilts), each with its exact
+        thrust least squares; one that already delivers the wrench within the
+        feasibility tolerance is taken (the common case: the exact solution
+        lies just beyond a tilt limit or the tilt step). Stage 2: a coarse grid
+        joins them and the best two are refined by
+        :meth:`_reduced_gauss_newton`.
+        """
         lo, hi = box[:, 0], box[:, 1]
-        points = [np.clip(s, lo, hi) for s in starts if np.all(np.isfinite(s))]
+        points = [self._nearest_in_box(s, box) for s in starts if np.all(np.isfinite(s))]
         if prev is not None:
             points.append(np.clip(prev, lo, hi))
-        grid = (0.0, 0.5, 1.0)
-        points.extend(lo + (hi - lo) * np.array([a, b]) for a in grid for b in grid)
-        cand = np.unique(np.array(points), axis=0)
-        thrusts, cost = self._thrusts_for_tilts(tau, cand)
-        order = np.argsort(cost, kind='stable')
-        best_f, best_t, best_c = thrusts[order[0]], cand[order[0]], float(cost[order[0]])
-        # Scaled units (see _error_weights): cost is the squared weighted error
-        # divided by max(|tau|, fmax)^2. A start already this good needs no search.
-        good_enough = (0.01 * FEASIBILITY_RTOL) ** 2
-        if best_c > good_enough:
+        result: AllocationResult | None = None
+        if points:
+            cand = np.array(points)
+            thrusts, _, cost = self._thrusts_for_tilts(tau, cand)
+            k = int(np.argmin(cost))
+            result = self._make(tau, thrusts[k], cand[k], 'optimized', math.nan)
+        if result is None or not result.feasible:
+            grid = (0.0, 0.5, 1.0)
+            points.extend(lo + (hi - lo) * np.array([a, b]) for a in grid for b in grid)
+            cand = np.unique(np.array(points), axis=0)
+            thrusts, _, cost = self._thrusts_for_tilts(tau, cand)
+            order = np.argsort(cost, kind='stable')
+            best_f, best_t, best_c = thrusts[order[0]], cand[order[0]], float(cost[order[0]])
             for k in order[:2]:
-                _, t = self._levenberg_marquardt(tau, thrusts[k], cand[k], box)
-                f_exact, c_exact = self._thrusts_for_tilts(tau, t[None, :])
-                if c_exact[0] < best_c:
-                    best_f, best_t, best_c = f_exact[0], t, float(c_exact[0])
-                if best_c <= good_enough:
-                    break
-        result = self._make(tau, best_f, best_t, 'optimized', math.nan)
+                f, t, c = self._reduced_gauss_newton(tau, cand[k], box)
+                if c < best_c:
+                    best_f, best_t, best_c = f, t, c
+            result = self._make(tau, best_f, best_t, 'optimized', math.nan)
         if incumbent is not None and incumbent.error <= result.error:
             return incumbent
         return result
 
-    def _levenberg_marquardt(self, tau: FloatArray, f0: FloatArray, t0: FloatArray,
-                             box: FloatArray, iterations: int = 40
-                             ) -> tuple[FloatArray, FloatArray]:
-        """Projected Levenberg-Marquardt on x = (f1..f4, alpha, beta) within bounds."""
-        fmax = np.where(self._available, self.max_thrust, 0.0)
-        lower = np.concatenate([-fmax, box[:, 0]])
-        upper = np.concatenate([fmax, box[:, 1]])
-        w = self._error_weights(tau)
-        x = np.concatenate([f0, t0])
+    def _reduced_gauss_newton(self, tau: FloatArray, t0: FloatArray, box: FloatArray,
+                              iterations: int = 25) -> tuple[FloatArray, FloatArray, float]:
+        """Damped Gauss-Newton over the two tilts on the reduced problem.
 
-        def residual(x: FloatArray) -> tuple[FloatArray, FloatArray]:
-            B, dB = self._columns(x[4:])
-            r = (B @ x[:4] - tau) * w
-            J = np.empty((6, 6))
-            J[:, :4] = B * w[:, None]
-            J[:, 4] = (dB[:, :2] @ x[:2]) * w
-            J[:, 5] = (dB[:, 2:] @ x[2:4]) * w
-            return r, J
+        Variable projection: for given tilts the thrusts are the exact bounded
+        least-squares solution, so only the tilts are searched. The Jacobian of
+        the reduced residual is a forward difference; each trial point is
+        evaluated together with its two neighbours in one batched solve, so an
+        accepted step comes with its next Jacobian. Steps are projected onto the
+        box and accepted only if they lower the error.
+        """
+        lo, hi = box[:, 0], box[:, 1]
+        delta = 1e-7
 
-        r, J = residual(x)
-        cost = float(r @ r)
-        lam = 1e-3
-        span = np.maximum(upper - lower, 1e-12)
+        def evaluate(t: FloatArray) -> tuple[FloatArray, FloatArray, float, FloatArray]:
+            d = np.where(t + delta <= hi, delta, -delta)   # neighbours stay in the box
+            pts = np.array([t, [t[0] + d[0], t[1]], [t[0], t[1] + d[1]]])
+            f, r, c = self._thrusts_for_tilts(tau, pts)
+            return f[0], r[0], float(c[0]), ((r[1:] - r[0]) / d[:, None]).T
+
+        t = np.clip(t0, lo, hi)
+        f, r, cost, J = evaluate(t)
+        lam = 1e-6
         for _ in range(iterations):
-            g = J.T @ r
-            eps = 1e-12 * span
-            active = (((x <= lower + eps) & (g > 0)) | ((x >= upper - eps) & (g < 0))
-                      | (lower == upper))
-            free = ~active
-            if not np.any(free):
-                break
-            JF = J[:, free]
-            N = JF.T @ JF
+            JtJ, g = J.T @ J, J.T @ r
             improved = False
-            while lam < 1e10:
-                Nd = N + lam * (np.diag(np.diag(N)) + 1e-12 * np.eye(len(N)))
-                step = np.zeros(6)
-                step[free] = -np.linalg.solve(Nd, g[free])
-                x_new = np.clip(x + step, lower, upper)
-                r_new, J_new = residual(x_new)
-                cost_new = float(r_new @ r_new)
-                if cost_new < cost:
-                    gain = cost - cost_new
-                    x, r, J, cost = x_new, r_new, J_new, cost_new
-                    lam = max(lam / 3.0, 1e-12)
-                    improved = gain > 1e-14 * (cost + 1e-300)
+            while lam < 1e8:
+                step = -np.linalg.solve(JtJ + lam * (np.diag(np.diag(JtJ)) + 1e-12 * np.eye(2)),
+                                        g)
+                trial = np.clip(t + step, lo, hi)
+                f_t, r_t, c_t, J_t = evaluate(trial)
+                if c_t < cost:
+                    improved = c_t < cost * (1 - 1e-9)
+                    t, f, r, cost, J = trial, f_t, r_t, c_t, J_t
+                    lam = max(lam / 10.0, 1e-12)
                     break
-                lam *= 5.0
-            if not improved or cost <= 1e-30:
+                lam *= 10.0
+            if not improved or cost <= 1e-32:
                 break
-        return x[:4], x[4:]
+        return f, t, cost
 
     # ------------------------------------------------------------------ batch
 
@@ -1067,7 +1070,7 @@ _PATTERNS = np.array(list(itertools.product((0, 1, 2), repeat=4)))
 
 
 def _bounded_lstsq(B: FloatArray, target: FloatArray, lower: FloatArray,
-                   upper: FloatArray) -> tuple[FloatArray, FloatArray]:
+                   upper: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
     """min ||B x - target||^2 with lower <= x <= upper, exactly, for a stack B (m, 6, 4).
 
     The unconstrained solution is tried first; rows where it leaves the box
@@ -1088,7 +1091,7 @@ def _bounded_lstsq(B: FloatArray, target: FloatArray, lower: FloatArray,
         x[out] = _enumerate_active_sets(G[out], g[out], lower, upper)
     x = np.clip(x, lower, upper)
     resid = np.einsum('mij,mj->mi', B, x) - target
-    return x, np.sum(resid ** 2, axis=1)
+    return x, resid, np.sum(resid ** 2, axis=1)
 
 
 def _enumerate_active_sets(G: FloatArray, g: FloatArray, lower: FloatArray,
