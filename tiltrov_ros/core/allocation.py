@@ -65,7 +65,9 @@ tilt near +90 deg is not flipped to -90 deg when it need not be.
 Choosing the solution (Section 3.2, completed)
 ----------------------------------------------
 Among discrete solutions, the one whose tilts move least from ``previous``
-(sum of squared tilt changes; from 0 without ``previous``), as in the paper;
+(sum of squared tilt changes; from 0 without ``previous``), as in the paper,
+ties going to positive thrust (at +-90 deg from neutral: the thrust line can
+then turn on past vertical without a 180 deg flip);
 only solutions within the thrust limit and the tilt range (and, in robust
 mode, within ``max_tilt_step`` of ``previous``) qualify. Within a family, "moves
 the tilts least" has no minimiser worth having (it pushes the thrusts to their
@@ -570,7 +572,11 @@ class ThrustAllocator:
                     continue
                 move = (a - ref0) ** 2 + (b - ref1) ** 2
                 thrust2 = f[0] * f[0] + f[1] * f[1] + f[2] * f[2] + f[3] * f[3]
-                key = (thrust2, move, 0.0) if cfg.family else (0.0, move, thrust2)
+                # Ties (gamma = +-90 deg from neutral) go to positive thrust:
+                # then the thrust line can turn on past vertical without a flip.
+                reverse = -(f[0] + f[1] + f[2] + f[3])
+                key = ((thrust2, move, reverse, 0.0) if cfg.family
+                       else (0.0, move, reverse, thrust2))
                 ranked.append((key, f, a, b, cfg.family))
         ranked.sort(key=lambda item: item[0])
         exact_tol = _EXACT_RTOL * _norm(tau)
@@ -793,11 +799,13 @@ class ThrustAllocator:
         fam = solved.family[:, :, None] & np.ones((1, 1, 9), dtype=bool)
         move = np.sum((tilts - ref[:, None, None, :]) ** 2, axis=3)
         thrust2 = np.sum(thrusts ** 2, axis=3)
+        reverse = -np.sum(thrusts, axis=3).reshape(n, -1)
         primary = np.where(ok, np.where(fam, thrust2, 0.0), np.inf).reshape(n, -1)
         secondary = move.reshape(n, -1)
-        tertiary = np.where(fam, 0.0, thrust2).reshape(n, -1)
+        quaternary = np.where(fam, 0.0, thrust2).reshape(n, -1)
         rows = np.flatnonzero(ok.reshape(n, -1).any(axis=1))
-        pick: NDArray[np.intp] = np.lexsort((tertiary, secondary, primary), axis=1)[rows, 0]
+        pick: NDArray[np.intp] = np.lexsort((quaternary, reverse, secondary, primary),
+                                            axis=1)[rows, 0]
         f = thrusts.reshape(n, -1, 4)[rows, pick]
         t = np.clip(tilts.reshape(n, -1, 2)[rows, pick], lo, hi)
         if self.mode == 'paper':
