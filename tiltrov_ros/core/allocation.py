@@ -288,7 +288,12 @@ class ThrustAllocator:
             result = self._optimize(tau, prev, box, starts=[], incumbent=None)
         else:
             configs, disc = self._candidates(tau)
-            result_or_none = self._choose(tau, configs, disc, prev, box)
+            if configs is None:
+                # A family: select with the vectorised twin (hundreds of samples).
+                result_or_none = self._choose_family(tau, prev)
+                configs = self._configs_from_batch(tau) if result_or_none is None else []
+            else:
+                result_or_none = self._choose(tau, configs, disc, prev, box)
             if result_or_none is None and self.mode == 'robust':
                 snapped = self._snapped_candidates(tau)
                 result_or_none = self._choose(tau, snapped, disc, prev, box, strict=False)
@@ -437,8 +442,12 @@ class ThrustAllocator:
 
     # ------------------------------------------------------------------ closed form
 
-    def _candidates(self, tau: FloatArray) -> tuple[list[_Config], float]:
-        """Exact solutions of (*) for one wrench, and the discriminant of (**)."""
+    def _candidates(self, tau: FloatArray) -> tuple[list[_Config] | None, float]:
+        """Exact solutions of (*) for one wrench, and the discriminant of (**).
+
+        None instead of the list when the solutions form a one-parameter family
+        (see :meth:`_choose_family` and :meth:`_configs_from_batch`).
+        """
         scale = max(abs(float(v)) for v in tau)
         if scale == 0.0:
             return [_Config(np.zeros(4), np.zeros(2), False, (True, True))], math.nan
@@ -453,8 +462,7 @@ class ThrustAllocator:
         small_k, small_H = abs(kappa) <= tol1, abs(H) <= tol1
         if ((small_P and small_Q and (small_k or small_H))
                 or (small_k and small_H and abs(P + Q) <= tol2)):
-            # Rare and not speed critical: the vectorised family sampler.
-            return self._configs_from_batch(tau), math.nan
+            return None, math.nan
         a, b, c = H, -(P + Q + kappa * H), kappa * P
         disc = b * b - 4.0 * a * c
         roots: list[float] = []
@@ -496,6 +504,15 @@ class ThrustAllocator:
             configs.append(_Config(thrusts, np.array([alpha, beta]), False, (free_f, free_r)))
         return configs, disc
 
+    def _choose_family(self, tau: FloatArray,
+                       prev: FloatArray | None) -> AllocationResult | None:
+        """The family member :meth:`_choose` would pick, by the vectorised selector."""
+        rows, f, t = self._choose_rows(tau[None, :], None if prev is None else prev[None, :])
+        if not len(rows):
+            return None
+        method = 'family' if np.any(f[0]) else 'zero'
+        return self._make(tau, f[0], t[0], method, math.nan)
+
     def _snapped_candidates(self, tau: FloatArray) -> list[_Config]:
         """Exact candidates of tau with its tiny components (< SNAP_RTOL) set to zero.
 
@@ -510,7 +527,7 @@ class ThrustAllocator:
         if np.array_equal(snapped, tau):
             return []
         configs, _ = self._candidates(snapped)
-        return configs
+        return self._configs_from_batch(snapped) if configs is None else configs
 
     def _configs_from_batch(self, tau: FloatArray) -> list[_Config]:
         solved = _solve_batch(tau[None, :], self.length, self.width, self._k)
