@@ -122,6 +122,8 @@ FEASIBILITY_RTOL = 1e-6
 #: Robust mode: wrench components below this fraction of the largest one may be
 #: read as zero to reach a family of solutions (see ``_snapped_candidates``).
 SNAP_RTOL = 1e-6
+# Tilt motions (sum of squared changes, rad^2) closer than this are ties.
+_MOVE_RESOLUTION = 1e-12
 # Slack on a negative discriminant of (**) read as a double root (rounding).
 _DISC_RTOL = 1e-13
 # A candidate of the closed form must reproduce the wrench to this (relative).
@@ -132,7 +134,7 @@ _FAMILY_RTOL = 1e-12
 # no thrust and a free tilt: its share of the wrench is below 1e-12 relative.
 _ZERO_PAIR = 1e-12
 # Samples along a one-parameter family of exact solutions.
-_FAMILY_SAMPLES = 97
+_FAMILY_SAMPLES = 33
 # Rows per vectorised chunk of allocate_batch.
 _BATCH_CHUNK = 2048
 # Regularisation of the thrust least squares (relative to the Gram matrix).
@@ -587,7 +589,8 @@ class ThrustAllocator:
                     continue
                 if not (lo0 <= a <= hi0 and lo1 <= b <= hi1):
                     continue
-                move = (a - ref0) ** 2 + (b - ref1) ** 2
+                # Tilt motions within _MOVE_RESOLUTION rad^2 count as ties.
+                move = round(((a - ref0) ** 2 + (b - ref1) ** 2) / _MOVE_RESOLUTION)
                 thrust2 = f[0] * f[0] + f[1] * f[1] + f[2] * f[2] + f[3] * f[3]
                 # Ties (gamma = +-90 deg from neutral) go to positive thrust:
                 # then the thrust line can turn on past vertical without a flip.
@@ -792,7 +795,12 @@ class ThrustAllocator:
         else:
             box_lo = np.maximum(lo, prev - self.max_tilt_step)
             box_hi = np.minimum(hi, prev + self.max_tilt_step)
-        solved = _solve_batch(taus, self.length, self.width, self._k)
+        aims = np.stack([ref, box_lo, box_hi], axis=2)           # (n, 2, 3)
+        solved = _solve_batch(taus, self.length, self.width, self._k, aims)
+        used = solved.valid.any(axis=0)                          # slots some row needs
+        solved = _Solved(solved.thrusts[:, used], solved.tilts[:, used], solved.valid[:, used],
+                         solved.family[:, used], solved.tilt_free[:, used],
+                         solved.discriminant)
         # Equivalent tilts gamma + {0, pi, -pi} per pair: 9 variants per candidate.
         shifts = np.array([0.0, math.pi, -math.pi])
         signs = np.array([1.0, -1.0, -1.0])
@@ -814,7 +822,7 @@ class ThrustAllocator:
             ok &= np.all((tilts >= box_lo[:, None, None, :] - _LIMIT_SLACK)
                          & (tilts <= box_hi[:, None, None, :] + _LIMIT_SLACK), axis=3)
         fam = solved.family[:, :, None] & np.ones((1, 1, 9), dtype=bool)
-        move = np.sum((tilts - ref[:, None, None, :]) ** 2, axis=3)
+        move = np.round(np.sum((tilts - ref[:, None, None, :]) ** 2, axis=3) / _MOVE_RESOLUTION)
         thrust2 = np.sum(thrusts ** 2, axis=3)
         reverse = -np.sum(thrusts, axis=3).reshape(n, -1)
         primary = np.where(ok, np.where(fam, thrust2, 0.0), np.inf).reshape(n, -1)
@@ -928,7 +936,8 @@ def _family_rows(tau: FloatArray, length: float, width: float, k: float) -> Bool
     return family
 
 
-def _solve_batch(tau: FloatArray, length: float, width: float, k: float) -> _Solved:
+def _solve_batch(tau: FloatArray, length: float, width: float, k: float,
+                 aims: FloatArray | None = None) -> _Solved:
     """All exact (U, V) of (*) for each row of tau (n, 6), mapped to actuators.
 
     The vectorised twin of :meth:`ThrustAllocator._candidates` (a test keeps
@@ -965,7 +974,7 @@ def _solve_batch(tau: FloatArray, length: float, width: float, k: float) -> _Sol
     V = np.where(np.abs(U) >= np.abs(U - kappa[:, None]), v_p, v_q)
     family = np.zeros(U.shape, dtype=bool)
     if np.any(any_family):
-        fu, fv = _family_samples(fam1, fam2, fam3, (Zf, Zr, Df, Dr, kappa, H), P, mag)
+        fu, fv = _family_samples(fam1, fam2, fam3, (Zf, Zr, Df, Dr, kappa, H), P, mag, aims)
         U = np.concatenate([U, fu], axis=1)
         V = np.concatenate([V, fv], axis=1)
         family = np.concatenate([family, np.ones(fu.shape, dtype=bool)], axis=1)
@@ -984,6 +993,9 @@ def _solve_batch(tau: FloatArray, length: float, width: float, k: float) -> _Sol
                         HH - V + Dr[:, None], HH - V - Dr[:, None]], axis=2)
     thrusts, tilts, free = _pairs_to_actuators(z, h)
     # Verify every candidate on eq. (4) (scaled units): (*) can hide an amplified error.
+    # Thrusts this far beyond the wrench's scale are of no use (and would overflow).
+    valid &= np.all(np.abs(thrusts) < 1e100, axis=2)
+    thrusts = np.where(valid[..., None], thrusts, 0.0)
     unit = tau / s[:, None]
     achieved = thrust_wrench(thrusts, tilts[..., 0], tilts[..., 1], length, width)
     error = np.linalg.norm(achieved - unit[:, None, :], axis=2)
@@ -1023,15 +1035,20 @@ def _kink_points(fixed: FloatArray, slope: FloatArray, offset: FloatArray) -> Fl
 
 
 def _family_samples(fam1: BoolArray, fam2: BoolArray, fam3: BoolArray,
-                    geometry: tuple[FloatArray, ...], P: FloatArray,
-                    mag: FloatArray) -> tuple[FloatArray, FloatArray]:
+                    geometry: tuple[FloatArray, ...], P: FloatArray, mag: FloatArray,
+                    aims: FloatArray | None = None) -> tuple[FloatArray, FloatArray]:
     """(U, V) samples along the one-parameter families, NaN where a row has none.
 
     Spread around each family's least-thrust member, which is included
     (F1, U = 0: V = H/2; F2, V = 0: U = kappa/2; F3, V = P/U: U = +-sqrt|P|),
     plus, for F1 and F2, the candidates for the member whose largest thruster
     force is least (:func:`_kink_points`): if any member is within the thrust
-    limit, that one is, so solutions at the limit are not missed.
+    limit, that one is, so solutions at the limit are not missed. ``aims``
+    (n, 2, k): tilts per pair (front, rear) to aim at, e.g. the previous tilts
+    and the edges of their reach; along F1 and F2 a pair's tilt is explicit
+    in the family parameter (F1: tan(alpha) = Zf / V, tan(beta) = Zr / (H - V);
+    F2: tan(alpha) = U / Df, tan(beta) = (U - kappa) / Dr), so the members with
+    those tilts are added.
     """
     Zf, Zr, Df, Dr, kappa, H = geometry
     n, s = len(H), _FAMILY_SAMPLES
@@ -1047,6 +1064,15 @@ def _family_samples(fam1: BoolArray, fam2: BoolArray, fam3: BoolArray,
                             0.5 * np.stack([Zf, Zf, Zr - kappa, Zr + kappa], axis=1))
     f1_v = np.concatenate([0.5 * H[:, None] + spread, f1_kinks], axis=1)
     f2_u = np.concatenate([0.5 * kappa[:, None] + spread, f2_kinks], axis=1)
+    if aims is not None:
+        tan_f, tan_r = np.tan(aims[:, 0, :]), np.tan(aims[:, 1, :])
+        with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
+            f1_v = np.concatenate([f1_v, Zf[:, None] / tan_f,
+                                   H[:, None] - Zr[:, None] / tan_r], axis=1)
+            f2_u = np.concatenate([f2_u, Df[:, None] * tan_f,
+                                   kappa[:, None] + Dr[:, None] * tan_r], axis=1)
+        f1_v = np.where(np.isfinite(f1_v), f1_v, np.nan)
+        f2_u = np.where(np.isfinite(f2_u), f2_u, np.nan)
     m = f1_v.shape[1]
     nan = np.full((n, m), np.nan)
     f1_u = np.where(fam1[:, None], 0.0, nan)
