@@ -121,7 +121,7 @@ DEFAULT_WEIGHTS = (1.0, 1.0, 10.0, 10.0, 10.0, 1.0)
 FEASIBILITY_RTOL = 1e-6
 #: Robust mode: wrench components below this fraction of the largest one may be
 #: read as zero to reach a family of solutions (see ``_snapped_candidates``).
-SNAP_RTOL = 1e-6
+SNAP_RTOL = 1e-5
 # Tilt motions (sum of squared changes, rad^2) closer than this are ties.
 _MOVE_RESOLUTION = 1e-12
 # Slack on a negative discriminant of (**) read as a double root (rounding).
