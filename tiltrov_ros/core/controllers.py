@@ -30,7 +30,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 import math
 from pathlib import Path
-from typing import Any, ClassVar, Literal, Protocol
+from typing import Any, ClassVar, Literal, NamedTuple, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -55,8 +55,7 @@ _HORIZONTAL = np.array([1.0, 1.0, 0.0, 0.0, 0.0, 1.0])
 _VERTICAL = np.array([0.0, 0.0, 1.0, 1.0, 1.0, 0.0])
 
 
-@dataclass(frozen=True)
-class Reference:
+class Reference(NamedTuple):
     """Desired pose and its rate, as the ``setpoint`` messages carry them.
 
     position : (3,) eta_d position in NED [m]
@@ -66,12 +65,13 @@ class Reference:
 
     position: FloatArray
     quaternion: FloatArray
-    velocity: FloatArray = field(default_factory=lambda: np.zeros(6))
+    velocity: FloatArray
 
     @classmethod
     def hold(cls, position: ArrayLike = (0.0, 0.0, 0.0),
              quaternion: ArrayLike = (1.0, 0.0, 0.0, 0.0)) -> Reference:
-        return cls(np.asarray(position, dtype=float), np.asarray(quaternion, dtype=float),
+        """A constant setpoint with no feed-forward."""
+        return cls(np.array(position, dtype=float), np.array(quaternion, dtype=float),
                    np.zeros(6))
 
 

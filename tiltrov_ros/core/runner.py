@@ -32,11 +32,12 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 import math
-from typing import Any, NamedTuple, Protocol
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from tiltrov_ros.core.controllers import Reference
 from tiltrov_ros.core.errors import ParameterError
 from tiltrov_ros.core.plant import Plant, PlantSample
 from tiltrov_ros.core.runlog import RunLog
@@ -46,14 +47,6 @@ FloatArray = NDArray[np.float64]
 
 #: The paper's control cycle (Section 4), ns.
 DEFAULT_CONTROL_PERIOD_NS = 50_000_000
-
-
-class Reference(NamedTuple):
-    """What the ``setpoint`` and ``setpoint_velocity`` messages carry at a tick."""
-
-    position: FloatArray      # (3,) m, eta_d position in NED
-    quaternion: FloatArray    # (4,) (w, x, y, z), eta_d attitude
-    velocity: FloatArray      # (6,) d(eta_d)/dt: (x y z) rates, (roll pitch yaw) rates
 
 
 ReferenceFn = Callable[[float], tuple[ArrayLike, ArrayLike, ArrayLike]]
