@@ -530,3 +530,36 @@ def test_near_degenerate_wrench_is_snapped_to_its_family_in_robust_mode() -> Non
     assert result.method == 'family' and result.feasible
     assert np.max(np.abs(result.tilts - previous.tilts)) <= step
     assert np.linalg.norm(result.achieved - hairy) < 1e-6 * np.linalg.norm(hairy)
+
+
+# ------------------------------------------------------------------------ configuration
+
+
+def test_shipped_allocator_config_builds_the_servo_reach() -> None:
+    from tiltrov_ros.core.allocation import load_allocator_config
+    from tiltrov_ros.core.params import load_control_period, load_robot_params
+
+    config = load_allocator_config()
+    robot = load_robot_params()
+    period = load_control_period()
+    assert period == 0.05
+    alloc = config.build(robot, period)
+    assert alloc.mode == 'robust'
+    assert alloc.max_tilt_step == pytest.approx(robot.tilt_rate_limit * 0.05)
+    assert alloc.max_tilt_step == pytest.approx(math.radians(7.5))
+    assert (alloc.length, alloc.width, alloc.max_thrust) == (robot.length, robot.width,
+                                                            robot.max_thrust)
+
+
+@pytest.mark.parametrize(('values', 'name'), [
+    ({'mode': 'fast'}, 'mode'),
+    ({'max_tilt_step': 'big'}, 'max_tilt_step'),
+    ({'weights': [1, 1, 1]}, 'weights'),
+    ({'weights': [1, 1, 1, 1, 1, 0]}, 'weights'),
+])
+def test_invalid_allocator_config_names_the_parameter(values: dict, name: str) -> None:
+    from tiltrov_ros.core.allocation import AllocatorConfig
+    from tiltrov_ros.core.errors import ParameterError
+
+    with pytest.raises(ParameterError, match=name):
+        AllocatorConfig.from_mapping(values, source='thrust_allocator.yaml')

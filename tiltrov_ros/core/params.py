@@ -250,3 +250,33 @@ def load_robot_params(path: str | Path | None = None) -> RobotParams:
                 return RobotParams.from_mapping(ros_params[PREFIX], source=source)
     raise ParameterError(PREFIX, 'no <node>: ros__parameters: robot: block found',
                          source=source)
+
+
+#: The paper's control cycle (Section 4), s; the default of ``control_period``.
+DEFAULT_CONTROL_PERIOD = 0.05
+
+
+def load_control_period(path: str | Path | None = None) -> float:
+    """The stack's ``control_period`` (s) from the shared robot file (default: shipped).
+
+    It sits next to the ``robot`` block in ``/**: ros__parameters:``, so every
+    node reads the same value; absent, it is the paper's 50 ms.
+    """
+    if path is None:
+        from tiltrov_ros.paths import config_file
+        path = config_file(ROBOT_YAML)
+    source = str(path)
+    with Path(path).open(encoding='utf-8') as stream:
+        document = yaml.safe_load(stream)
+    value: Any = DEFAULT_CONTROL_PERIOD
+    if isinstance(document, Mapping):
+        for section in document.values():
+            ros_params = section.get('ros__parameters') if isinstance(section, Mapping) else None
+            if isinstance(ros_params, Mapping) and 'control_period' in ros_params:
+                value = ros_params['control_period']
+                break
+    if (isinstance(value, bool) or not isinstance(value, (int, float))
+            or not math.isfinite(value) or value <= 0):
+        raise ParameterError('control_period', f'got {value!r}; allowed: a number of '
+                             'seconds > 0', source=source)
+    return float(value)
