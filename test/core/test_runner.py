@@ -217,3 +217,22 @@ def test_bad_shapes_from_the_controller_raise(params: RobotParams) -> None:
 
     with pytest.raises(ValueError, match='controller wrench'):
         run(Plant(params), Broken(), LstsqAllocator(params), hold_reference(), 0.1)
+
+
+def test_run_scenario_assembles_the_shipped_stack() -> None:
+    from tiltrov_ros.core.runner import run_scenario, stack_config
+
+    config = stack_config('pitch_hold', 'pid')
+    assert config.robot.max_thrust == 40.0 and config.control_period == 0.05
+    assert config.controller.kind == 'pid' and config.allocator.mode == 'robust'
+    log = run_scenario(config, duration=2.0)
+    assert len(log.t) == 201 and len(log.tc) == 40
+    assert log.meta['scenario'] == 'pitch_hold' and log.meta['controller'] == 'pid'
+    # The plant carries the scenario's center-of-mass error, the controller not.
+    assert log.meta['true_center_of_gravity'] == pytest.approx([0.01, 0.0, 0.025])
+    # The reference is the scenario's: pitch ramps to -30 deg in 30 s.
+    from tiltrov_ros.core.kinematics import euler_from_quat
+    assert euler_from_quat(log.setpoint_quaternion[-1])[1] == pytest.approx(
+        math.radians(-30.0) * 1.95 / 30.0)
+    again = run_scenario(stack_config('pitch_hold', 'pid'), duration=2.0)
+    np.testing.assert_array_equal(log.position, again.position)   # deterministic

@@ -31,16 +31,32 @@ The controller and allocator are anything with the methods of
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 import math
+from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tiltrov_ros.core.controllers import Reference
+from tiltrov_ros.core.allocation import (
+    AllocatorConfig,
+    ThrustAllocator,
+    load_allocator_config,
+)
+from tiltrov_ros.core.controllers import (
+    Controller,
+    ControllerConfig,
+    Reference,
+    load_controller_config,
+    make_controller,
+)
 from tiltrov_ros.core.errors import ParameterError
+from tiltrov_ros.core.kinematics import quat_from_euler
+from tiltrov_ros.core.params import RobotParams, load_control_period, load_robot_params
 from tiltrov_ros.core.plant import Plant, PlantSample
 from tiltrov_ros.core.runlog import RunLog
+from tiltrov_ros.core.scenarios import Scenario, load_scenario
 from tiltrov_ros.core.timebase import seconds, to_ns
 
 FloatArray = NDArray[np.float64]
@@ -238,3 +254,96 @@ def hold_reference(position: ArrayLike = (0.0, 0.0, 0.0),
         return p, q, v
 
     return reference
+
+
+# --------------------------------------------------------------------------- scenarios
+
+
+@dataclass(frozen=True)
+class StackConfig:
+    """Everything a run needs, resolved from the shipped (or given) files.
+
+    The ROS nodes build their objects from the same values (their parameters
+    are the same YAML files), so a lockstep run and :func:`run_scenario` agree.
+    """
+
+    scenario: Scenario
+    robot: RobotParams              # nominal robot, scenario overrides applied
+    controller: ControllerConfig
+    allocator: AllocatorConfig
+    control_period: float           # s
+    step_size: float = 0.01         # s
+
+    @property
+    def control_period_ns(self) -> int:
+        return to_ns(self.control_period)
+
+    @property
+    def step_ns(self) -> int:
+        return to_ns(self.step_size)
+
+    def build_plant(self) -> Plant:
+        """The plant at the scenario's initial state, with its disturbances."""
+        init = self.scenario.initial_state
+        return Plant(self.robot, self.scenario.disturbances, step_ns=self.step_ns,
+                     position=init.position, quaternion=quat_from_euler(*init.euler),
+                     nu=init.nu)
+
+    def build_controller(self) -> Controller:
+        return make_controller(self.controller, self.robot)
+
+    def build_allocator(self) -> ThrustAllocator:
+        return self.allocator.build(self.robot, self.control_period)
+
+    def describe(self) -> dict[str, Any]:
+        """JSON-serialisable run description for RunLog.meta and bags."""
+        return {
+            'scenario': self.scenario.name,
+            'scenario_file': self.scenario.source,
+            'controller': self.controller.kind,
+            'allocator_mode': self.allocator.mode,
+            'max_tilt_step': self.allocator.tilt_step(self.robot, self.control_period),
+            'control_period': self.control_period,
+            'step_size': self.step_size,
+            'max_thrust': self.robot.max_thrust,
+            'tilt_min': self.robot.tilt_min,
+            'tilt_max': self.robot.tilt_max,
+            'tilt_rate_limit': self.robot.tilt_rate_limit,
+        }
+
+
+def stack_config(scenario: str | Path | Scenario, controller: str | None = None, *,
+                 allocator_mode: str | None = None, robot_file: str | Path | None = None,
+                 controller_file: str | Path | None = None,
+                 allocator_file: str | Path | None = None,
+                 step_size: float = 0.01) -> StackConfig:
+    """Resolve a scenario (name, path or object) and the YAML files into a StackConfig.
+
+    ``controller`` (pd | switching | pid) and ``allocator_mode`` (robust | paper)
+    override the files' choices.
+    """
+    scn = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+    robot = scn.robot(load_robot_params(robot_file))
+    ctrl = load_controller_config(controller_file)
+    if controller is not None:
+        ctrl = ctrl.with_kind(controller)
+    alloc = load_allocator_config(allocator_file)
+    if allocator_mode is not None:
+        alloc = AllocatorConfig.from_mapping({'mode': allocator_mode,
+                                              'max_tilt_step': alloc.max_tilt_step,
+                                              'weights': list(alloc.weights)})
+    return StackConfig(scn, robot, ctrl, alloc, load_control_period(robot_file), step_size)
+
+
+def run_scenario(config: StackConfig, *, duration: float | None = None,
+                 progress: Callable[[float], None] | None = None) -> RunLog:
+    """Run a scenario headless: the same core objects, in the order the ROS stack uses.
+
+    ``duration`` overrides the scenario's (s).
+    """
+    plant = config.build_plant()
+    profile = config.scenario.reference
+    return run(plant, config.build_controller(), config.build_allocator(),
+               profile.at, config.scenario.duration if duration is None else duration,
+               control_period_ns=config.control_period_ns, progress=progress,
+               meta=config.describe())
