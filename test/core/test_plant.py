@@ -338,9 +338,9 @@ def test_a_free_robot_drifts_with_the_current(neutral: RobotParams,
                                               current: tuple[float, float, float]) -> None:
     """Heading 1 rad: the current is rotated into the body frame (along x, or z).
 
-    One body axis only: with C(nu) of the absolute velocity (the project's
-    decision), a drift along two body axes at once would also feel a Munk moment.
-    """
+    From rest, along one body axis: the relative flow is along that axis during
+    the spin-up, so no Munk moment arises and the attitude stays. (An oblique
+    relative flow does turn a body: that moment is physical.)"""
     p = dataclasses.replace(neutral, linear_damping=(50.0, 50.0, 50.0, 3.0, 5.0, 5.0))
     plant = Plant(p, Disturbances(current=current),
                   quaternion=quat_from_euler(0.0, 0.0, 1.0))
@@ -348,3 +348,18 @@ def test_a_free_robot_drifts_with_the_current(neutral: RobotParams,
     np.testing.assert_allclose(plant.rotation @ plant.nu[:3], current, atol=1e-6)
     # The current pushes through the damping only: no moment, the attitude stays.
     np.testing.assert_allclose(plant.euler, [0.0, 0.0, 1.0], atol=1e-9)
+
+
+@pytest.mark.parametrize('current', [(0.3, 0.0, 0.0), (0.2, -0.15, 0.05), (0.0, 0.25, -0.1)])
+def test_a_robot_drifting_with_the_water_feels_nothing(neutral: RobotParams,
+                                                      current: tuple[float, float, float]
+                                                      ) -> None:
+    """nu_r = 0: no drag and no Munk moment, whatever the direction (C(nu_r), not C(nu))."""
+    attitude = quat_from_euler(0.2, -0.3, 1.0)
+    nu_c = Rquat(attitude).T @ np.array(current)
+    plant = Plant(neutral, Disturbances(current=current), quaternion=attitude,
+                  nu=(*nu_c, 0.0, 0.0, 0.0))
+    plant.step(2000)                                          # 20 s
+    np.testing.assert_allclose(plant.nu, [*nu_c, 0.0, 0.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(plant.quaternion, attitude, atol=1e-12)
+    np.testing.assert_allclose(plant.position, 20.0 * np.array(current), atol=1e-9)

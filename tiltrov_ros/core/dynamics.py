@@ -3,20 +3,20 @@
 State ``x`` (13,) = [position in NED (3, m), quaternion (w, x, y, z) of the body
 FRD orientation in NED (4), nu = (u v w p q r) in the body frame (6, m/s, rad/s)].
 
-Equations (the current enters only through the relative velocity in the
-damping, a project decision)::
+Equations, with the ocean current in the relative-velocity form::
 
-    p_dot = R(q) nu_1                                  (2), translational part
-    q_dot = T(q) nu_2                                  (2) with a quaternion
-    M nu_dot + C(nu) nu + D(nu_r) nu_r + g(eta) = tau  (1)
-    nu_r  = nu - [R(q)^T v_c; 0]                       v_c: current in NED
+    p_dot = R(q) nu_1                                          (2), translation
+    q_dot = T(q) nu_2                                          (2), as a quaternion
+    M nu_r_dot + C(nu_r) nu_r + D(nu_r) nu_r + g(eta) = tau    (1) relative to the water
+    nu_r  = nu - nu_c,  nu_c = [R(q)^T v_c; 0]                 v_c: current in NED
+    nu_dot = nu_r_dot + nu_c_dot,  nu_c_dot = [-omega x R^T v_c; 0]
 
-Because C(nu) takes the absolute velocity (M of (A.2) lumps rigid-body and
-added mass, so C_RB and C_A cannot be told apart), a robot drifting with the
-water along two body axes at once still feels the Munk moment
-(m_i - m_j) nu_i nu_j, although the water is at rest relative to it. Fossen's
-form M_RB nu_dot + C_RB(nu) nu + M_A nu_r_dot + C_A(nu_r) nu_r + ... would need
-that split.
+For a constant, irrotational current this is Fossen's relative-velocity form
+of (1) (Fossen 2021, Sec. 10.3): M of (A.2) lumps rigid-body and added mass,
+and C(nu_r) of (A.3) with the relative velocity means a robot drifting with the
+water feels neither drag nor a Munk moment. In still water (v_c = 0) it is
+exactly eq. (1). A slowly varying (Gauss-Markov) current is held over each
+plant step; its own rate is neglected, as usual.
 
 Two implementations of the same right-hand side:
 
@@ -158,10 +158,12 @@ def f(t: float, x: ArrayLike, u: ArrayLike, params: RobotParams,
     nu_r = relative_velocity(nu, R, current)
     M = mass_matrix(params)                                 # (A.2)
     rhs = (tau
-           - coriolis_matrix(params, nu) @ nu               # (A.3)
+           - coriolis_matrix(params, nu_r) @ nu_r           # (A.3), relative velocity
            - damping_matrix(params, nu_r) @ nu_r            # (A.4) + linear
            - restoring_forces(params, R))                   # g(eta)
-    nu_dot = np.linalg.solve(M, rhs)                        # (1)
+    nu_dot = np.linalg.solve(M, rhs)                        # (1), nu_r_dot
+    nu_c = nu - nu_r                                        # [R^T v_c; 0]
+    nu_dot[:3] -= np.cross(nu[3:], nu_c[:3])                # + nu_c_dot (constant v_c in NED)
     return np.concatenate([p_dot, q_dot, nu_dot])
 
 
@@ -236,28 +238,31 @@ def _make_derivative(params: RobotParams) -> Derivative:
         dqx = 0.5 * (qw * p - qz * q + qy * r)
         dqy = 0.5 * (qz * p + qw * q - qx * r)
         dqz = 0.5 * (-qy * p + qx * q + qw * r)
-        # nu_r = nu - [R^T v_c; 0].
+        # nu_c = [R^T v_c; 0], nu_r = nu - nu_c.
         vc1, vc2, vc3 = vc
-        ur = u - (R11 * vc1 + R21 * vc2 + R31 * vc3)
-        vr = v - (R12 * vc1 + R22 * vc2 + R32 * vc3)
-        wr = w - (R13 * vc1 + R23 * vc2 + R33 * vc3)
-        # C(nu) nu of (A.3) = [omega x a; nu_1 x a + omega x b], a = M11 nu_1, b = M22 nu_2.
-        a1, a2, a3 = m1 * u, m2 * v, m3 * w
+        cu = R11 * vc1 + R21 * vc2 + R31 * vc3
+        cv = R12 * vc1 + R22 * vc2 + R32 * vc3
+        cw = R13 * vc1 + R23 * vc2 + R33 * vc3
+        ur, vr, wr = u - cu, v - cv, w - cw
+        # C(nu_r) nu_r of (A.3) = [omega x a; nu_r1 x a + omega x b],
+        # a = M11 nu_r1, b = M22 nu_2.
+        a1, a2, a3 = m1 * ur, m2 * vr, m3 * wr
         b1, b2, b3 = m4 * p, m5 * q, m6 * r
         C1 = q * a3 - r * a2
         C2 = r * a1 - p * a3
         C3 = p * a2 - q * a1
-        C4 = v * a3 - w * a2 + q * b3 - r * b2
-        C5 = w * a1 - u * a3 + r * b1 - p * b3
-        C6 = u * a2 - v * a1 + p * b2 - q * b1
+        C4 = vr * a3 - wr * a2 + q * b3 - r * b2
+        C5 = wr * a1 - ur * a3 + r * b1 - p * b3
+        C6 = ur * a2 - vr * a1 + p * b2 - q * b1
         # g(eta) = -[(W - B) k; c x k], k = R^T e_3 (Fossen 2021, Sec. 4.1).
         t1, t2, t3, t4, t5, t6 = tau
-        # (1): nu_dot = M^-1 (tau - C nu - D(nu_r) nu_r - g), D of (A.4) plus linear.
+        # (1): nu_r_dot = M^-1 (tau - C(nu_r) nu_r - D(nu_r) nu_r - g), D of (A.4)
+        # plus linear; nu_dot = nu_r_dot - omega x nu_c1 (constant current in NED).
         return [
             dn, de, dd, dqw, dqx, dqy, dqz,
-            i1 * (t1 - C1 - (d1 * fabs(ur) + l1) * ur + wmb * R31),
-            i2 * (t2 - C2 - (d2 * fabs(vr) + l2) * vr + wmb * R32),
-            i3 * (t3 - C3 - (d3 * fabs(wr) + l3) * wr + wmb * R33),
+            i1 * (t1 - C1 - (d1 * fabs(ur) + l1) * ur + wmb * R31) - (q * cw - r * cv),
+            i2 * (t2 - C2 - (d2 * fabs(vr) + l2) * vr + wmb * R32) - (r * cu - p * cw),
+            i3 * (t3 - C3 - (d3 * fabs(wr) + l3) * wr + wmb * R33) - (p * cv - q * cu),
             i4 * (t4 - C4 - (d4 * fabs(p) + l4) * p + (c2 * R33 - c3 * R32)),
             i5 * (t5 - C5 - (d5 * fabs(q) + l5) * q + (c3 * R31 - c1 * R33)),
             i6 * (t6 - C6 - (d6 * fabs(r) + l6) * r + (c1 * R32 - c2 * R31)),
