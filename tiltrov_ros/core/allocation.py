@@ -792,7 +792,7 @@ class ThrustAllocator:
         return result
 
     def _reduced_gauss_newton(self, tau: FloatArray, t0: FloatArray, box: FloatArray,
-                              iterations: int = 25) -> tuple[FloatArray, FloatArray, float]:
+                              iterations: int = 12) -> tuple[FloatArray, FloatArray, float]:
         """Damped Gauss-Newton over the two tilts on the reduced problem.
 
         Variable projection: for given tilts the thrusts are the exact bounded
@@ -817,13 +817,15 @@ class ThrustAllocator:
         for _ in range(iterations):
             JtJ, g = J.T @ J, J.T @ r
             improved = False
-            while lam < 1e8:
+            for _ in range(5):                       # at most five damping increases
                 step = -np.linalg.solve(JtJ + lam * (np.diag(np.diag(JtJ)) + 1e-12 * np.eye(2)),
                                         g)
                 trial = np.clip(t + step, lo, hi)
+                if np.max(np.abs(trial - t)) < 1e-8:    # no move left worth making
+                    break
                 f_t, r_t, c_t, J_t = evaluate(trial)
                 if c_t < cost:
-                    improved = c_t < cost * (1 - 1e-9)
+                    improved = c_t < cost * (1 - 1e-6)
                     t, f, r, cost, J = trial, f_t, r_t, c_t, J_t
                     lam = max(lam / 10.0, 1e-12)
                     break
