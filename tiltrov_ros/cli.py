@@ -23,6 +23,8 @@ class Command(NamedTuple):
 COMMANDS: dict[str, Command] = {
     'demo': Command('.demo', "run the full stack on the paper's positioning scenario "
                              '(bag, figures, metrics)'),
+    'bench': Command('.bench', 'run the benchmarks of a source checkout (speed ratios '
+                               'against baselines measured in the same run)'),
 }
 
 
