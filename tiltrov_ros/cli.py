@@ -23,6 +23,7 @@ class Command(NamedTuple):
 COMMANDS: dict[str, Command] = {
     'demo': Command('.demo', "run the full stack on the paper's positioning scenario "
                              '(bag, figures, metrics)'),
+    'bag': Command('.bag.cli', 'look into a bag (info) or repair one whose recorder was killed'),
 }
 
 

@@ -8,6 +8,7 @@ messages in log-time order and never deserializes them here.
 from __future__ import annotations
 
 from collections.abc import Collection, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 import json
 from pathlib import Path
@@ -85,15 +86,19 @@ def resolve(path: str | Path) -> Path:
     raise BagError(f'no bag at {path}')
 
 
-def open_reader(path: str | Path) -> Reader:
-    """An opened rosbags :class:`Reader` (close it, or use it as a context manager)."""
+@contextmanager
+def open_reader(path: str | Path) -> Iterator[Reader]:
+    """``with open_reader(bag) as reader:`` an opened rosbags :class:`Reader`."""
     reader = Reader(resolve(path))
     try:
         reader.open()
     except (ReaderError, OSError, KeyError, ValueError) as exc:
         raise BagError(f'cannot open bag {path}: {exc} '
                        f'(if the recorder was killed, run `tiltrov bag repair {path}`)') from exc
-    return reader
+    try:
+        yield reader
+    finally:
+        reader.close()
 
 
 def _custom_data(reader: Reader, path: Path) -> dict[str, str]:
