@@ -24,6 +24,7 @@ COMMANDS: dict[str, Command] = {
     'demo': Command('.demo', "run the full stack on the paper's positioning scenario "
                              '(bag, figures, metrics)'),
     'bag': Command('.bag.cli', 'look into a bag (info) or repair one whose recorder was killed'),
+    'replay': Command('.bag.replay', 'publish a recorded bag into a live graph'),
 }
 
 
