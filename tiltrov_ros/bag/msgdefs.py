@@ -40,6 +40,7 @@ def typestore() -> Typestore:
     return get_typestore(Stores.ROS2_JAZZY)
 
 
+@cache
 def message_definition(msgtype: str) -> tuple[str, str]:
     """``(ros2msg text, RIHS01 hash)`` of ``msgtype`` (``pkg/msg/Type``).
 

@@ -60,7 +60,7 @@ from rosbags.interfaces import Connection
 
 from .. import __version__
 from ..bag.bagfile import RUN_INFO_KEY, parse_run_info
-from ..bag.msgdefs import message_class
+from ..bag.msgdefs import message_class, message_definition
 from ..bag.qos import matches, subscription_qos, to_bag_qos
 from ..bag.topics import CLOCK_TOPIC, STACK_TOPICS, is_hidden, normalize_type
 from ..bag.writer import COMPRESSIONS, BagWriter
@@ -237,6 +237,9 @@ class BagRecorder(Node):
         for relative, msgtype in STACK_TOPICS.items():
             name = self.resolve_topic_name(relative)
             if self._in_scope(name):
+                # Load the definitions now: a first message must not stall the
+                # recorder while publishers with shallow queues keep sending.
+                message_definition(msgtype)
                 self._subscribe(name, msgtype, [])
         if self._use_sim_time and self._clock_topic is None:
             self._subscribe(CLOCK_TOPIC, STACK_TOPICS[CLOCK_TOPIC], [], record=False)
