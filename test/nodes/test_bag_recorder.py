@@ -6,12 +6,16 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+import signal
+import subprocess
+import sys
 from typing import Any
 
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from nav_msgs.msg import Odometry
 import pytest
+from rclpy.duration import Duration
 from rclpy.exceptions import InvalidParameterValueException
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -180,6 +184,36 @@ def test_defaults_without_a_parameter_file(ros: Any, tmp_path: Path,
     assert set(recorder.subscribed_topics) >= {'/odom', '/joint_states', '/clock', '/wrench_cmd'}
     recorder.close()
     assert (tmp_path / recorder.output / 'metadata.yaml').is_file()
+
+
+@pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM])
+def test_a_signal_closes_the_bag(ros: Any, tmp_path: Path, sig: signal.Signals) -> None:
+    """The standalone process records what it was sent and writes a complete bag."""
+    bag = tmp_path / 'signalled'
+    argv = recorder_command(str(bag), params={'topics': ['odom']})
+    argv[0] = str(Path(sys.executable).with_name('bag_recorder'))
+    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        pub = ros.node('plant').create_publisher(Odometry, 'odom', 100)
+        wait_matched(ros, [pub], timeout=30.0)
+        for i in range(100):
+            pub.publish(odom(i))
+        # Acknowledged: in the recorder's queue, which it empties before closing.
+        assert pub.wait_for_all_acked(Duration(seconds=10))
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=20)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 0, err
+    assert 'recorded 100 messages on 1 topics' in err
+    assert 'Traceback' not in err and 'Failed to publish' not in err
+    with Reader(bag) as reader:
+        assert reader.message_count == 100
+        assert [bytes(d) for _, _, d in reader.messages()] == [
+            canonical(serialize_message(odom(i)), 'nav_msgs/msg/Odometry') for i in range(100)]
 
 
 def test_recorder_command_quotes_strings() -> None:

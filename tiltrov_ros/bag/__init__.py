@@ -5,3 +5,9 @@
 Importing this package does not import rclpy; only :mod:`.qos` and
 :mod:`.replay` (and the recorder node) need it.
 """
+
+from .bagfile import RUN_INFO_KEY, BagInfo, bag_info, iter_raw
+from .reader import Decoder, Series, read_runlog, read_series
+
+__all__ = ['RUN_INFO_KEY', 'BagInfo', 'Decoder', 'Series', 'bag_info', 'iter_raw',
+           'read_runlog', 'read_series']
