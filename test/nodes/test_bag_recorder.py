@@ -9,6 +9,7 @@ from pathlib import Path
 import signal
 import subprocess
 import sys
+import threading
 from typing import Any
 
 from mcap.reader import make_reader
@@ -194,25 +195,34 @@ def test_a_signal_closes_the_bag(ros: Any, tmp_path: Path, sig: signal.Signals) 
     argv[0] = str(Path(sys.executable).with_name('bag_recorder'))
     proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                             text=True)
+    lines: list[str] = []
+    reader = threading.Thread(target=lambda: lines.extend(iter(proc.stderr.readline, '')),
+                              daemon=True)
+    reader.start()
     try:
         pub = ros.node('plant').create_publisher(Odometry, 'odom', 100)
         wait_matched(ros, [pub], timeout=30.0)
+        # The node has started once it logs where it records.
+        assert ros.spin_until(lambda: any('] [bag_recorder]: recording' in line
+                                          for line in lines), timeout=30.0), lines
         for i in range(100):
             pub.publish(odom(i))
         # Acknowledged: in the recorder's queue, which it empties before closing.
         assert pub.wait_for_all_acked(Duration(seconds=10))
         proc.send_signal(sig)
-        _, err = proc.communicate(timeout=20)
+        proc.wait(timeout=20)
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+    reader.join(timeout=5)
+    err = ''.join(lines)
     assert proc.returncode == 0, err
     assert 'recorded 100 messages on 1 topics' in err
-    assert 'Traceback' not in err and 'Failed to publish' not in err
-    with Reader(bag) as reader:
-        assert reader.message_count == 100
-        assert [bytes(d) for _, _, d in reader.messages()] == [
+    assert 'Traceback' not in err and 'Failed to publish' not in err, err
+    with Reader(bag) as bag_reader:
+        assert bag_reader.message_count == 100
+        assert [bytes(d) for _, _, d in bag_reader.messages()] == [
             canonical(serialize_message(odom(i)), 'nav_msgs/msg/Odometry') for i in range(100)]
 
 

@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 from datetime import datetime
 import functools
 import json
+import signal
 import struct
 import sys
 import time
@@ -50,7 +51,7 @@ from rclpy.clock_type import ClockType
 from rclpy.context import Context
 from rclpy.event_handler import QoSMessageLostInfo, SubscriptionEventCallbacks
 from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 import rclpy.logging
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -185,7 +186,7 @@ class _Topic:
     record: bool
     sub: Subscription | None = None
     connection: Connection | None = None
-    type_hash: str = ''
+    offered: list[Any] = field(default_factory=list)   # publishers' TopicEndpointInfo
     received: int = 0
     lost: int = 0
     warned: set[str] = field(default_factory=set)
@@ -262,9 +263,10 @@ class BagRecorder(Node):
             return False
         return self.config.include_hidden or not is_hidden(name)
 
-    def _subscribe(self, name: str, msgtype: str, offered: Sequence[QoSProfile], *,
+    def _subscribe(self, name: str, msgtype: str, publishers: Sequence[Any], *,
                    record: bool = True) -> None:
-        """Create (or re-create) the raw subscription of ``name``."""
+        """Create (or re-create) the raw subscription of ``name`` for ``publishers``
+        (the graph's endpoint infos, possibly none yet)."""
         try:
             msg_class = message_class(msgtype)
         except BagError as exc:
@@ -272,7 +274,7 @@ class BagRecorder(Node):
                 self._skipped.add(name)
                 self.get_logger().warning(f'not recording {name}: {exc}')
             return
-        qos = subscription_qos(offered, self.config.queue_depth)
+        qos = subscription_qos([p.qos_profile for p in publishers], self.config.queue_depth)
         if name == CLOCK_TOPIC and not record:
             qos.reliability = ReliabilityPolicy.BEST_EFFORT  # time only: match any /clock
         topic = self._topics.get(name)
@@ -284,6 +286,7 @@ class BagRecorder(Node):
             if topic.sub is not None:
                 self.destroy_subscription(topic.sub)
             topic.qos = qos
+        topic.offered = list(publishers) or topic.offered
         events = SubscriptionEventCallbacks(
             message_lost=functools.partial(self._on_lost, topic))
         topic.sub = self.create_subscription(
@@ -301,21 +304,22 @@ class BagRecorder(Node):
                 infos = self.get_publishers_info_by_topic(name)
                 if not infos:
                     continue
-                offered = [info.qos_profile for info in infos]
                 topic = self._topics.get(name)
                 if topic is None:
                     if len(types) != 1:
                         self._skipped.add(name)
                         self.get_logger().warning(f'not recording {name}: several types {types}')
                         continue
-                    self._subscribe(name, normalize_type(types[0]), offered)
-                elif normalize_type(types[0]) != topic.msgtype or len(types) != 1:
+                    self._subscribe(name, normalize_type(types[0]), infos)
+                    continue
+                topic.offered = infos
+                if normalize_type(types[0]) != topic.msgtype or len(types) != 1:
                     self._warn_once(topic, 'type', f'{name} is published as {types}; '
                                     f'recording only {topic.msgtype}')
-                elif not matches(topic.qos, offered):
+                elif not matches(topic.qos, [info.qos_profile for info in infos]):
                     self.get_logger().info(f'{name}: adapting the subscription QoS to its '
                                            'publishers')
-                    self._subscribe(name, topic.msgtype, offered)
+                    self._subscribe(name, topic.msgtype, infos)
         except Exception as exc:  # graph queries during shutdown; never kill the executor
             self._errors += 1
             self.get_logger().error(f'graph discovery failed: {exc}',
@@ -368,7 +372,12 @@ class BagRecorder(Node):
             self._log_flushed()
 
     def _add_connection(self, topic: _Topic) -> Connection:
-        infos = self.get_publishers_info_by_topic(topic.name)
+        """The topic's bag connection, with its publishers' QoS (from the graph now,
+        or as last discovered when the graph is gone, e.g. after a signal)."""
+        try:
+            infos = self.get_publishers_info_by_topic(topic.name) or topic.offered
+        except Exception:
+            infos = topic.offered
         type_hash = next((str(i.topic_type_hash) for i in infos
                           if str(getattr(i, 'topic_type_hash', '')).startswith('RIHS01_')), '')
         return self._bag.add_topic(topic.name, topic.msgtype,
@@ -500,17 +509,28 @@ def _yaml_value(value: Any) -> str:
 
 def main(args: list[str] | None = None) -> int:
     """``bag_recorder [--ros-args -p output:=DIR ...]``."""
+    # rclpy's handlers shut the context down on SIGINT and SIGTERM (spin then
+    # ends cleanly) and chain to the previous handler: for SIGINT, Python's,
+    # which would raise KeyboardInterrupt anywhere, even inside a bag write.
+    signal.signal(signal.SIGINT, lambda signum, frame: None)
     rclpy.init(args=args)
+    # Created now, while the context is valid: a signal may come during start-up.
+    executor = SingleThreadedExecutor()
     node: BagRecorder | None = None
     try:
         node = BagRecorder()
-        rclpy.spin(node)
+        rclpy.spin(node, executor)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (TiltrovError, ParameterException) as exc:
         print(f'bag_recorder: {exc}', file=sys.stderr)
         return 1
+    except Exception:
+        if rclpy.ok():
+            raise
+        # else: a signal shut the context down while the node was starting
     finally:
+        executor.shutdown(timeout_sec=1.0)
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
