@@ -237,6 +237,31 @@ def test_intact_bags_are_left_alone_unless_forced(tmp_path: Path) -> None:
     assert repair(bag, force=True).backups[0].name == 'bag.mcap.bak.1'  # never overwritten
 
 
+def test_a_bag_still_being_recorded_is_not_touched(tmp_path: Path) -> None:
+    bag = BagWriter(tmp_path / 'live')
+    conn = bag.add_topic('/wrench_cmd', 'geometry_msgs/msg/WrenchStamped')
+    bag.write(conn, 1, wrench_bytes(1))
+    bag.flush()
+    with pytest.raises(BagError, match='still being recorded'):
+        repair(tmp_path / 'live')
+    assert not list((tmp_path / 'live').glob('*.bak'))
+    bag.close()
+    assert repair(tmp_path / 'live').backups == []  # closed properly: intact
+
+
+def test_bag_info_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    with BagWriter(tmp_path / 'bag', custom_data={RUN_INFO_KEY: json.dumps(RUN_INFO)}) as bag:
+        conn = bag.add_topic('/wrench_cmd', 'geometry_msgs/msg/WrenchStamped')
+        for i in range(3):
+            bag.write(conn, 1_000_000_000 + i * 250_000_000, wrench_bytes(i))
+    assert tiltrov(['bag', 'info', str(tmp_path / 'bag')]) == 0
+    out = capsys.readouterr().out
+    assert 'messages:  3' in out and 'duration:  0.500 s' in out
+    assert '/wrench_cmd         3  geometry_msgs/msg/WrenchStamped' in out
+    assert json.dumps(RUN_INFO, sort_keys=True) in out
+    assert tiltrov(['bag', 'info', str(tmp_path / 'nothing')]) == 1
+
+
 def test_not_an_mcap_file_is_an_error(tmp_path: Path) -> None:
     bag = tmp_path / 'bag'
     bag.mkdir()

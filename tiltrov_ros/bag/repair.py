@@ -40,7 +40,7 @@ import yaml
 
 from ..core.errors import BagError
 from .msgdefs import hash_of_definition, message_definition
-from .writer import BagWriter
+from .writer import BagWriter, is_being_written
 
 REPAIRED_KEY = 'tiltrov.repaired'
 
@@ -159,10 +159,13 @@ def repair(path: str | Path, *, force: bool = False) -> RepairResult:
         The recovered counts; ``backups`` is empty when the bag was intact.
 
     Raises:
-        BagError: not a bag, or a file that is not MCAP at all.
+        BagError: not a bag, a file that is not MCAP at all, or a bag a live
+            recorder is still writing.
 
     """
     directory, mcap = find_mcap(path)
+    if is_being_written(mcap):
+        raise BagError(f'{mcap} is still being recorded; stop the recorder first')
     reason = problem(directory)
     size = mcap.stat().st_size
     if reason is None and not force:

@@ -85,7 +85,7 @@ class Player:
         self.topics = [name for name in self.info.topics
                        if (name in wanted if wanted else name != CLOCK_TOPIC)]
         self.generate_clock = self.options.clock and CLOCK_TOPIC not in self.info.topics
-        if self.options.clock and not self.generate_clock:
+        if self.options.clock and not self.generate_clock and CLOCK_TOPIC not in self.topics:
             self.topics.append(CLOCK_TOPIC)
         self.publishers: dict[str, Any] = {}
         for name in self.topics:

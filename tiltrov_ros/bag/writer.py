@@ -36,6 +36,28 @@ METADATA_VERSION: Literal[9] = 9  # rosbag2 metadata version of ROS 2 Jazzy
 COMPRESSIONS = ('none', 'zstd')
 
 
+def _lock(stream: Any, *, exclusive: bool) -> bool:
+    """Advisory lock on an open file: the writer holds it exclusively while the bag
+    is open (the kernel drops it when the process dies), so ``tiltrov bag repair``
+    can tell a bag still being recorded. False when another process holds it."""
+    try:
+        import fcntl
+    except ImportError:  # not POSIX: no check
+        return True
+    try:
+        fcntl.flock(stream.fileno(), (fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH)
+                    | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return False
+    return True
+
+
+def is_being_written(mcap: Path) -> bool:
+    """True when a live :class:`BagWriter` (in any process) has ``mcap`` open."""
+    with mcap.open('rb') as stream:
+        return not _lock(stream, exclusive=False)
+
+
 class BagWriter:
     """One rosbag2 bag with MCAP storage, open for writing.
 
@@ -76,6 +98,7 @@ class BagWriter:
             self._writer.abort()
             raise BagError('this rosbags version has no flushable MCAP storage '
                            '(tested with rosbags 0.11)')
+        _lock(self._storage.bio, exclusive=True)  # released when closed or killed
         self._chunks_done = 0
         self._topics: dict[int, str] = {}
         self._flushed: dict[int, int] = {}
