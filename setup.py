@@ -17,6 +17,7 @@ package_name = 'tiltrov_ros'
 # lib/tiltrov_ros) and that a venv install puts on PATH.
 console_scripts = [
     'tiltrov = tiltrov_ros.cli:main',
+    'bag_recorder = tiltrov_ros.nodes.bag_recorder:main',
 ]
 
 setup(

@@ -25,6 +25,8 @@ COMMANDS: dict[str, Command] = {
                              '(bag, figures, metrics)'),
     'bench': Command('.bench', 'run the benchmarks of a source checkout (speed ratios '
                                'against baselines measured in the same run)'),
+    'bag': Command('.bag.cli', 'look into a bag (info) or repair one whose recorder was killed'),
+    'replay': Command('.bag.replay', 'publish a recorded bag into a live graph'),
 }
 
 

@@ -1,0 +1,541 @@
+"""``bag_recorder``: records the stack's topics into a rosbag2 bag with MCAP storage.
+
+The serialized CDR bytes each subscription receives are written untouched
+(raw subscriptions, no deserialization), with the publishers' QoS in the
+metadata and the message definitions as ``ros2msg`` schemas, so ``ros2 bag``,
+rosbags, the mcap library and Foxglove open the bag. See README.md, "Bags".
+
+Design points:
+
+* Throughput: each callback, after the message the executor took, takes the
+  messages already queued on the same subscription (up to ``_DRAIN_LIMIT``),
+  which keeps the executor's per-message overhead off the hot path.
+* The stack's topics (:data:`~tiltrov_ros.bag.topics.STACK_TOPICS`) are
+  subscribed at start-up, before their publishers exist, so the first message
+  of a run is recorded; other topics are found by polling the graph every
+  ``discovery_period`` seconds.
+* Log time follows the node's clock. Without ``use_sim_time`` it is the time
+  the middleware received the message (system time). With ``use_sim_time`` it
+  is the value of the latest ``/clock`` message the recorder itself has taken,
+  and before writing any other message the recorder takes every ``/clock``
+  message already delivered. So every ``/clock`` message is logged at its own
+  value, log times never run backwards while sim time does not, and a message
+  published after the ``/clock`` that advanced time to t is logged at t or
+  later (same or faster delivery assumed; DDS does not order across topics).
+* ``flush_period`` bounds what a killed recorder loses: the pending MCAP chunk
+  is written out at least that often (and whenever it reaches 1 MiB).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from datetime import datetime
+import functools
+import json
+import signal
+import struct
+import sys
+import time
+from typing import Any
+
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    SetParametersResult,
+)
+import rclpy
+from rclpy.clock import Clock
+from rclpy.clock_type import ClockType
+from rclpy.context import Context
+from rclpy.event_handler import QoSMessageLostInfo, SubscriptionEventCallbacks
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+import rclpy.logging
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.subscription import Subscription
+from rosbags.interfaces import Connection
+
+from .. import __version__
+from ..bag.bagfile import RUN_INFO_KEY, parse_run_info
+from ..bag.msgdefs import message_class, message_definition
+from ..bag.qos import matches, subscription_qos, to_bag_qos
+from ..bag.topics import CLOCK_TOPIC, STACK_TOPICS, is_hidden, normalize_type
+from ..bag.writer import COMPRESSIONS, BagWriter
+from ..core.errors import BagError, ParameterError, TiltrovError
+
+NODE_NAME = 'bag_recorder'
+VERSION_KEY = 'tiltrov.version'
+_DRAIN_LIMIT = 1000       # messages taken per callback, for fairness between topics
+_THROTTLE = 5.0           # s, for repeated warnings from callbacks
+
+
+def clock_ns(data: bytes) -> int:
+    """Sim time (ns) carried by a serialized ``rosgraph_msgs/Clock``."""
+    if len(data) < 12:
+        raise BagError(f'/clock message of {len(data)} bytes')
+    fmt = '<iI' if data[1] == 1 else '>iI'  # CDR encapsulation 0x0001 = little endian
+    sec, nanosec = struct.unpack_from(fmt, data, 4)
+    return int(sec) * 1_000_000_000 + int(nanosec)
+
+
+@dataclass(frozen=True)
+class RecorderConfig:
+    """The recorder's parameters, validated."""
+
+    output: str
+    topics: tuple[str, ...]
+    exclude_topics: tuple[str, ...]
+    include_hidden: bool
+    compression: str
+    queue_depth: int
+    discovery_period: float
+    flush_period: float
+    run_info: str
+
+
+def _descriptor(description: str, *, read_only: bool = True,
+                floating: tuple[float, float] | None = None,
+                integer: tuple[int, int] | None = None,
+                constraints: str = '') -> ParameterDescriptor:
+    descriptor = ParameterDescriptor(description=description, read_only=read_only,
+                                     additional_constraints=constraints)
+    if floating is not None:
+        descriptor.floating_point_range = [
+            FloatingPointRange(from_value=floating[0], to_value=floating[1], step=0.0)]
+    if integer is not None:
+        descriptor.integer_range = [
+            IntegerRange(from_value=integer[0], to_value=integer[1], step=1)]
+    return descriptor
+
+
+def declare_parameters(node: Node) -> RecorderConfig:
+    """Declare the recorder's parameters on ``node`` and return them validated.
+
+    Raises:
+        ParameterError: a value outside its allowed set (ranges are enforced
+            by rclpy's descriptors at declaration).
+
+    """
+    d = node.declare_parameter
+    output = d('output', '', _descriptor(
+        'bag directory to create (must not exist); empty: rosbag2_YYYY_MM_DD-HH_MM_SS '
+        'in the working directory')).value
+    # String arrays are declared without a default: an empty YAML list reads as unset.
+    topics = d('topics', Parameter.Type.STRING_ARRAY, _descriptor(
+        'topics to record (relative names resolve in the node namespace); '
+        'unset or empty: every topic')).value or []
+    exclude = d('exclude_topics', Parameter.Type.STRING_ARRAY, _descriptor(
+        'topics never recorded when recording every topic')).value or []
+    include_hidden = d('include_hidden', False, _descriptor(
+        'when recording every topic, also record hidden topics (a name token '
+        'starting with _)')).value
+    compression = d('compression', 'none', _descriptor(
+        'MCAP chunk compression', constraints='none or zstd')).value
+    depth = d('queue_depth', 10000, _descriptor(
+        'history depth of each subscription; 0: KEEP_ALL', integer=(0, 1_000_000))).value
+    discovery = d('discovery_period', 0.5, _descriptor(
+        'seconds (wall clock) between polls of the ROS graph for new topics',
+        floating=(0.05, 60.0))).value
+    flush = d('flush_period', 1.0, _descriptor(
+        'seconds (wall clock) between writes of the pending MCAP chunk to disk, which '
+        'bounds what a killed recorder loses; 0: only when a chunk is full (1 MiB)',
+        floating=(0.0, 3600.0))).value
+    run_info = d('run_info', '{}', _descriptor(
+        'JSON object describing the run (scenario, controller, robot limits, ...), '
+        'stored in the bag metadata as custom_data "tiltrov.run_info"',
+        read_only=False)).value
+    if compression not in COMPRESSIONS:
+        raise ParameterError('compression', f'{compression!r} is not one of {COMPRESSIONS}')
+    try:
+        parse_run_info(run_info)
+    except BagError as exc:
+        raise ParameterError('run_info', str(exc)) from None
+    return RecorderConfig(
+        output=output, topics=tuple(topics), exclude_topics=tuple(exclude),
+        include_hidden=bool(include_hidden), compression=compression,
+        queue_depth=int(depth), discovery_period=float(discovery),
+        flush_period=float(flush), run_info=run_info)
+
+
+@dataclass
+class RecorderStats:
+    """Per-topic counters of a recorder."""
+
+    received: dict[str, int]    # messages taken from DDS
+    written: dict[str, int]     # messages written to the bag
+    flushed: dict[str, int]     # messages in complete chunks on disk
+    lost: dict[str, int]        # samples DDS reported lost (message_lost events)
+    errors: int                 # messages that could not be written
+
+    @property
+    def total(self) -> int:
+        return sum(self.written.values())
+
+
+@dataclass(eq=False)
+class _Topic:
+    """One subscribed topic."""
+
+    name: str
+    msgtype: str
+    qos: QoSProfile
+    record: bool
+    sub: Subscription | None = None
+    connection: Connection | None = None
+    offered: list[Any] = field(default_factory=list)   # publishers' TopicEndpointInfo
+    received: int = 0
+    lost: int = 0
+    warned: set[str] = field(default_factory=set)
+
+
+class BagRecorder(Node):
+    """Records topics into a rosbag2/MCAP bag (see the module docstring).
+
+    Args:
+        params: parameter values (``{'output': 'runs/x', 'run_info': '{...}'}``),
+            applied as overrides on top of ``cli_args``/parameter files.
+        node_name, namespace, context, cli_args: as for :class:`rclpy.node.Node`.
+
+    Raises:
+        ParameterError, rclpy ParameterException: invalid parameters.
+        BagError: the output directory exists or cannot be created.
+
+    """
+
+    def __init__(self, *, params: Mapping[str, Any] | None = None,
+                 node_name: str = NODE_NAME, namespace: str | None = None,
+                 context: Context | None = None,
+                 cli_args: Sequence[str] | None = None) -> None:
+        overrides = [Parameter(name, value=value) for name, value in (params or {}).items()]
+        super().__init__(node_name, namespace=namespace, context=context,
+                         cli_args=list(cli_args) if cli_args is not None else None,
+                         parameter_overrides=overrides)
+        self.config = declare_parameters(self)
+        output = self.config.output or datetime.now().strftime('rosbag2_%Y_%m_%d-%H_%M_%S')
+        self._bag = BagWriter(output, compression=self.config.compression, custom_data={
+            RUN_INFO_KEY: self.config.run_info, VERSION_KEY: __version__})
+        self.output = self._bag.path
+        self._use_sim_time = bool(self.get_parameter('use_sim_time').value)
+        self._clock_ns = 0
+        self._clock_topic: _Topic | None = None
+        self._topics: dict[str, _Topic] = {}
+        self._skipped: set[str] = set()
+        self._errors = 0
+        self._closed = False
+        # bound for draining a whole queue (a queue never holds more than its depth)
+        self._queue_limit = self.config.queue_depth or 1_000_000
+        self._selected = {self.resolve_topic_name(t) for t in self.config.topics}
+        self._excluded = {self.resolve_topic_name(t) for t in self.config.exclude_topics}
+        # Console only (not on /rosout): per-chunk debug lines would feed back into
+        # the bag, and the summary is logged after a signal shut the context down.
+        self._stats_logger = rclpy.logging.get_logger(f'{self.get_logger().name}.stats')
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+
+        for relative, msgtype in STACK_TOPICS.items():
+            name = self.resolve_topic_name(relative)
+            if self._in_scope(name):
+                # Load the definitions now: a first message must not stall the
+                # recorder while publishers with shallow queues keep sending.
+                message_definition(msgtype)
+                self._subscribe(name, msgtype, [])
+        if self._use_sim_time and self._clock_topic is None:
+            self._subscribe(CLOCK_TOPIC, STACK_TOPICS[CLOCK_TOPIC], [], record=False)
+
+        wall = Clock(clock_type=ClockType.STEADY_TIME)
+        self._discover()
+        self.create_timer(self.config.discovery_period, self._discover, clock=wall)
+        if self.config.flush_period > 0:
+            self.create_timer(self.config.flush_period, self._flush, clock=wall)
+        self.get_logger().info(
+            f'recording {"every topic" if not self._selected else sorted(self._selected)} '
+            f'into {self.output} (log time: {"/clock" if self._use_sim_time else "system"})')
+
+    # -- which topics ----------------------------------------------------------
+
+    def _in_scope(self, name: str) -> bool:
+        if self._selected:
+            return name in self._selected
+        if name in self._excluded:
+            return False
+        return self.config.include_hidden or not is_hidden(name)
+
+    def _subscribe(self, name: str, msgtype: str, publishers: Sequence[Any], *,
+                   record: bool = True) -> None:
+        """Create (or re-create) the raw subscription of ``name`` for ``publishers``
+        (the graph's endpoint infos, possibly none yet)."""
+        try:
+            msg_class = message_class(msgtype)
+        except BagError as exc:
+            if name not in self._skipped:
+                self._skipped.add(name)
+                self.get_logger().warning(f'not recording {name}: {exc}')
+            return
+        qos = subscription_qos([p.qos_profile for p in publishers], self.config.queue_depth)
+        if name == CLOCK_TOPIC and not record:
+            qos.reliability = ReliabilityPolicy.BEST_EFFORT  # time only: match any /clock
+        topic = self._topics.get(name)
+        if topic is None:
+            topic = _Topic(name, msgtype, qos, record)
+            self._topics[name] = topic
+        else:
+            self._drain(topic, limit=self._queue_limit)
+            if topic.sub is not None:
+                self.destroy_subscription(topic.sub)
+            topic.qos = qos
+        topic.offered = list(publishers) or topic.offered
+        events = SubscriptionEventCallbacks(
+            message_lost=functools.partial(self._on_lost, topic))
+        topic.sub = self.create_subscription(
+            msg_class, name, functools.partial(self._on_message, topic), qos,
+            raw=True, event_callbacks=events)
+        if name == CLOCK_TOPIC and self._use_sim_time:
+            self._clock_topic = topic
+
+    def _discover(self) -> None:
+        """Subscribe to new topics; re-subscribe where the publishers' QoS needs it."""
+        try:
+            for name, types in self.get_topic_names_and_types():
+                if not self._in_scope(name) or name in self._skipped:
+                    continue
+                infos = self.get_publishers_info_by_topic(name)
+                if not infos:
+                    continue
+                topic = self._topics.get(name)
+                if topic is None:
+                    if len(types) != 1:
+                        self._skipped.add(name)
+                        self.get_logger().warning(f'not recording {name}: several types {types}')
+                        continue
+                    self._subscribe(name, normalize_type(types[0]), infos)
+                    continue
+                topic.offered = infos
+                if normalize_type(types[0]) != topic.msgtype or len(types) != 1:
+                    self._warn_once(topic, 'type', f'{name} is published as {types}; '
+                                    f'recording only {topic.msgtype}')
+                elif not matches(topic.qos, [info.qos_profile for info in infos]):
+                    self.get_logger().info(f'{name}: adapting the subscription QoS to its '
+                                           'publishers')
+                    self._subscribe(name, topic.msgtype, infos)
+        except Exception as exc:  # graph queries during shutdown; never kill the executor
+            self._errors += 1
+            self.get_logger().error(f'graph discovery failed: {exc}',
+                                    throttle_duration_sec=_THROTTLE)
+
+    # -- messages ----------------------------------------------------------------
+
+    def _on_message(self, topic: _Topic, data: bytes, info: Mapping[str, Any]) -> None:
+        """Raw subscription callback: record this message and those queued behind it."""
+        try:
+            self._record(topic, data, info)
+            self._drain(topic, limit=_DRAIN_LIMIT)
+        except Exception as exc:
+            self._errors += 1
+            self.get_logger().error(f'cannot record a message of {topic.name}: {exc}',
+                                    throttle_duration_sec=_THROTTLE)
+
+    def _drain(self, topic: _Topic, limit: int) -> None:
+        """Take and record messages already queued on ``topic``'s subscription."""
+        sub = topic.sub
+        if sub is None:
+            return
+        handle = sub.handle
+        taken = 0
+        with handle:
+            while taken < limit:
+                got = handle.take_message(sub.msg_type, True)
+                if got is None:
+                    return
+                taken += 1
+                self._record(topic, got[0], got[1])
+
+    def _record(self, topic: _Topic, data: bytes, info: Mapping[str, Any]) -> None:
+        if self._closed:
+            return
+        topic.received += 1
+        if topic is self._clock_topic:
+            self._clock_ns = clock_ns(data)
+            log_time = self._clock_ns
+        elif self._clock_topic is not None:
+            self._drain(self._clock_topic, limit=_DRAIN_LIMIT)  # /clock before later data
+            log_time = self._clock_ns
+        else:
+            log_time = int(info.get('received_timestamp', 0)) or time.time_ns()
+        if not topic.record:
+            return
+        if topic.connection is None:
+            topic.connection = self._add_connection(topic)
+        if self._bag.write(topic.connection, log_time, data):
+            self._log_flushed()
+
+    def _add_connection(self, topic: _Topic) -> Connection:
+        """The topic's bag connection, with its publishers' QoS (from the graph now,
+        or as last discovered when the graph is gone, e.g. after a signal)."""
+        try:
+            infos = self.get_publishers_info_by_topic(topic.name) or topic.offered
+        except Exception:
+            infos = topic.offered
+        type_hash = next((str(i.topic_type_hash) for i in infos
+                          if str(getattr(i, 'topic_type_hash', '')).startswith('RIHS01_')), '')
+        return self._bag.add_topic(topic.name, topic.msgtype,
+                                   qos=[to_bag_qos(i.qos_profile) for i in infos],
+                                   rihs01=type_hash or None)
+
+    def _on_lost(self, topic: _Topic, info: QoSMessageLostInfo) -> None:
+        topic.lost = int(info.total_count)
+        self.get_logger().warning(f'{topic.name}: DDS lost {info.total_count_change} '
+                                  f'message(s) ({info.total_count} in total)',
+                                  throttle_duration_sec=_THROTTLE)
+
+    def _flush(self) -> None:
+        try:
+            if not self._closed and self._bag.flush():
+                self._log_flushed()
+        except Exception as exc:
+            self._errors += 1
+            self.get_logger().error(f'cannot flush {self.output}: {exc}',
+                                    throttle_duration_sec=_THROTTLE)
+
+    def _log_flushed(self) -> None:
+        flushed = self._bag.flushed_counts
+        self._stats_logger.debug(
+            f'flushed {sum(flushed.values())} {json.dumps(flushed, sort_keys=True)}')
+
+    def _warn_once(self, topic: _Topic, key: str, text: str) -> None:
+        if key not in topic.warned:
+            topic.warned.add(key)
+            self.get_logger().warning(text)
+
+    def _on_set_parameters(self, parameters: Iterable[Parameter]) -> SetParametersResult:
+        for parameter in parameters:
+            if parameter.name == 'run_info':
+                try:
+                    parse_run_info(str(parameter.value))
+                except BagError as exc:
+                    return SetParametersResult(successful=False, reason=str(exc))
+                if not self._closed:
+                    self._bag.set_custom_data(RUN_INFO_KEY, str(parameter.value))
+        return SetParametersResult(successful=True)
+
+    # -- results and shutdown ----------------------------------------------------
+
+    def stats(self) -> RecorderStats:
+        """Per-topic counters of the recorded topics that carried messages."""
+        recorded = [t for t in self._topics.values() if t.record]
+        return RecorderStats(
+            received={t.name: t.received for t in recorded if t.received},
+            written=self._bag.counts,
+            flushed=self._bag.flushed_counts,
+            lost={t.name: t.lost for t in recorded if t.lost},
+            errors=self._errors)
+
+    @property
+    def subscribed_topics(self) -> dict[str, str]:
+        """Recorded topic name -> type, as subscribed so far."""
+        return {t.name: t.msgtype for t in self._topics.values() if t.record}
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    def close(self) -> RecorderStats:
+        """Record what is still queued, close the bag and log the counts. Idempotent."""
+        if self._closed:
+            return self.stats()
+        for topic in list(self._topics.values()):
+            try:
+                self._drain(topic, limit=self._queue_limit)
+            except Exception as exc:  # e.g. the context is already shut down
+                self.get_logger().debug(f'final drain of {topic.name}: {exc}')
+        self._closed = True
+        for topic in self._topics.values():
+            sub, topic.sub = topic.sub, None
+            if sub is not None:
+                try:
+                    self.destroy_subscription(sub)
+                except Exception as exc:
+                    self.get_logger().debug(f'destroying the {topic.name} subscription: {exc}')
+        self._bag.close()
+        stats = self.stats()
+        lines = [f'recorded {stats.total} messages on {len(stats.written)} topics '
+                 f'into {self.output}']
+        lines += [f'  {name}: {count}' for name, count in sorted(stats.written.items())]
+        self._stats_logger.info('\n'.join(lines))
+        if stats.lost or stats.errors:
+            self._stats_logger.warning(f'lost in DDS: {stats.lost}; write errors: '
+                                       f'{stats.errors}')
+        return stats
+
+    def destroy_node(self) -> None:
+        try:
+            self.close()
+        except TiltrovError as exc:
+            self.get_logger().error(str(exc))
+        finally:
+            super().destroy_node()
+
+
+def recorder_command(output: str, *, run_info: Mapping[str, Any] | None = None,
+                     params: Mapping[str, Any] | None = None,
+                     executable: str = NODE_NAME) -> list[str]:
+    """argv that starts the recorder as a process (e.g. for the launcher).
+
+    ``params`` values are passed as ``-p name:=value`` with YAML quoting, so
+    strings (JSON included) stay strings.
+    """
+    values: dict[str, Any] = {'output': output, **(params or {})}
+    if run_info is not None:
+        values['run_info'] = json.dumps(dict(run_info), sort_keys=True)
+    argv = [executable, '--ros-args']
+    for name, value in values.items():
+        argv += ['-p', f'{name}:={_yaml_value(value)}']
+    return argv
+
+
+def _yaml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return 'true' if value else 'false'
+    if isinstance(value, (int, float)):
+        return repr(value)
+    if isinstance(value, str):
+        return "'" + value.replace("'", "''") + "'"
+    if isinstance(value, (list, tuple)):
+        return '[' + ', '.join(_yaml_value(v) for v in value) + ']'
+    raise TypeError(f'unsupported parameter value {value!r}')
+
+
+def main(args: list[str] | None = None) -> int:
+    """``bag_recorder [--ros-args -p output:=DIR ...]``."""
+    # rclpy's handlers shut the context down on SIGINT and SIGTERM (spin then
+    # ends cleanly) and chain to the previous handler: for SIGINT, Python's,
+    # which would raise KeyboardInterrupt anywhere, even inside a bag write.
+    signal.signal(signal.SIGINT, lambda signum, frame: None)
+    rclpy.init(args=args)
+    # Created now, while the context is valid: a signal may come during start-up.
+    executor = SingleThreadedExecutor()
+    node: BagRecorder | None = None
+    try:
+        node = BagRecorder()
+        rclpy.spin(node, executor)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (TiltrovError, ParameterException) as exc:
+        print(f'bag_recorder: {exc}', file=sys.stderr)
+        return 1
+    except Exception:
+        if rclpy.ok():
+            raise
+        # else: a signal shut the context down while the node was starting
+    finally:
+        executor.shutdown(timeout_sec=1.0)
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
