@@ -48,7 +48,8 @@ def test_ramp_term_value_and_rate() -> None:
     scn = _scenario({'x': [{'type': 'ramp', 'from': 1.0, 'to': 3.0, 'start': 2.0,
                             'duration': 4.0}]})
     assert _dof(scn, 0.0, 0) == (1.0, 0.0)              # held before
-    assert _dof(scn, 2.0, 0) == (1.0, 0.5)              # right derivative at the start
+    assert _dof(scn, 2.0, 0) == (1.0, 0.0)              # at the kink: the held piece's rate
+    assert _dof(scn, 2.5, 0) == (1.25, 0.5)
     assert _dof(scn, 3.0, 0) == (1.5, 0.5)
     assert _dof(scn, 6.0, 0) == (3.0, 0.0)              # held from the end on
     assert _dof(scn, 60.0, 0) == (3.0, 0.0)
@@ -67,7 +68,8 @@ def test_sine_term_value_and_rate() -> None:
         assert value == pytest.approx(0.4 * math.sin(0.5 * (t - 1.0) + 0.25), abs=1e-15)
         assert rate == pytest.approx(0.2 * math.cos(0.5 * (t - 1.0) + 0.25), abs=1e-15)
     held = 0.4 * math.sin(0.5 * 4.0 + 0.25)
-    assert _dof(scn, 5.0, 2) == pytest.approx((held, 0.0))
+    assert _dof(scn, 5.0, 2) == pytest.approx((held, 0.2 * math.cos(0.5 * 4.0 + 0.25)))
+    assert _dof(scn, 5.01, 2) == pytest.approx((held, 0.0))
     assert _dof(scn, 9.0, 2) == pytest.approx((held, 0.0))
 
 
@@ -273,7 +275,7 @@ def test_trajectory_is_section_4_2_as_documented() -> None:
         eta, rate = scn.reference.eta(t)
         np.testing.assert_allclose(eta, [t / 120.0, 0.0, -t / 120.0 + 0.4 * math.sin(omega * t),
                                          0, 0, 0], atol=1e-12)
-        if t < 120.0:
+        if 0.0 < t < 120.0:                             # away from the ramps' kinks
             np.testing.assert_allclose(rate[[0, 2]], [1 / 120.0, -1 / 120.0
                                                       + 0.4 * omega * math.cos(omega * t)],
                                        atol=1e-12)

@@ -38,10 +38,11 @@ scenario time, s):
 
 The reference gives eta_d and its exact time derivative (the feed-forward of
 ``setpoint_velocity``); as messages carry it, the attitude goes out as a
-quaternion. Where a term has a kink (a ramp's or a bounded sine's ends) the rate
-is the right derivative: the rate at which the reference moves from ``t`` on,
-which is what the controller's command, held over [t, t + T), should follow.
-A step's jump contributes no rate.
+quaternion. At the instant of a kink the rate is a one-sided derivative: a
+ramp's rate is 0 at its start and at its end (the rate of the held pieces), a
+sine's is its own rate at ``start`` and ``end``; a step's jump contributes no
+rate. (Which side is taken matters more than it seems: see README.md, "Known
+limitations", on the allocator holding both pairs at the +-90 deg edge.)
 """
 
 from __future__ import annotations
@@ -93,7 +94,7 @@ class Term:
         if self.kind == 'ramp':
             start, duration = self._p('start'), self._p('duration')
             a, b = self._p('from'), self._p('to')
-            if t < start:
+            if t <= start:
                 return a, 0.0
             if t >= start + duration:
                 return b, 0.0
@@ -102,7 +103,7 @@ class Term:
         amplitude, omega = self._p('amplitude'), self._p('omega')
         phase, start, end = self._p('phase'), self._p('start'), self._p('end', math.inf)
         tau = min(max(t, start), end) - start
-        rate = amplitude * omega * math.cos(omega * tau + phase) if start <= t < end else 0.0
+        rate = amplitude * omega * math.cos(omega * tau + phase) if start <= t <= end else 0.0
         return amplitude * math.sin(omega * tau + phase), rate
 
 
