@@ -23,6 +23,8 @@ class Command(NamedTuple):
 COMMANDS: dict[str, Command] = {
     'demo': Command('.demo', "run the full stack on the paper's positioning scenario "
                              '(bag, figures, metrics)'),
+    'sim': Command('.simulate', 'run a scenario headless (no ROS): time series, metrics.json, '
+                                'figures'),
 }
 
 

@@ -104,6 +104,7 @@ class ControlErrors:
     eta_d, eta : (n, 6) desired and actual (x y z [m], roll pitch yaw [rad])
     e : (n, 6) eta_d - eta, angles wrapped to (-pi, pi]
     ticks : (n,) indices of these ticks in the RunLog's control grid
+    rows : (n,) indices of their odometry samples in the plant grid
     """
 
     t: FloatArray
@@ -111,6 +112,7 @@ class ControlErrors:
     eta: FloatArray
     e: FloatArray
     ticks: NDArray[np.intp]
+    rows: NDArray[np.intp]
 
 
 def _euler_rows(quaternions: FloatArray) -> FloatArray:
@@ -144,7 +146,7 @@ def control_errors(log: RunLog) -> ControlErrors:
                        _euler_rows(log.setpoint_quaternion[ticks])])
     e = eta_d - eta
     e[:, 3:] = ssa(e[:, 3:])
-    return ControlErrors(log.tc[ticks], eta_d, eta, e, ticks)
+    return ControlErrors(log.tc[ticks], eta_d, eta, e, ticks, rows)
 
 
 def run_end(log: RunLog) -> float:
