@@ -25,6 +25,8 @@ COMMANDS: dict[str, Command] = {
                              '(bag, figures, metrics)'),
     'sim': Command('.simulate', 'run a scenario headless (no ROS): time series, metrics.json, '
                                 'figures'),
+    'report': Command('.report', "run the paper's scenarios with every controller; results "
+                                 'table and figures into README.md'),
 }
 
 

@@ -133,12 +133,20 @@ def test_settling_time() -> None:
         log.quaternion[i] = quat_from_euler(0.0, pitch_d[k] - pitch_err[k], 0.0)
     # x: leaves its 10 mm band at the very end: not settled. y: never leaves: 0.
     log.setpoint_position[-1, 0] = 0.02
+    # z: out of band until 25.5 s, in band for the last 4.45 s only (< 5 s): not settled;
+    # roll: the same until 24.9 s (in band for 5.05 s): settled.
+    log.setpoint_position[:, 2] = np.where(log.tc < 25.5, 0.02, 0.0)
+    roll_d = np.where(log.tc < 24.9, 1.0, 0.0) * DEG
+    for k in range(len(log.tc)):
+        log.setpoint_quaternion[k] = quat_from_euler(roll_d[k], pitch_d[k], 0.0)
     m = compute_metrics(log)
     assert m['settling_band']['pitch'] == pytest.approx(0.02 * 30 * DEG)
     assert m['settling_band']['x'] == pytest.approx(SETTLING_FLOOR[0])
     assert m['settling_time']['pitch'] == pytest.approx(5.0)
     assert m['settling_time']['x'] is None
     assert m['settling_time']['y'] == 0.0
+    assert m['settling_time']['z'] is None
+    assert m['settling_time']['roll'] == pytest.approx(24.9)
 
 
 def test_oscillation_over_the_last_20_seconds() -> None:

@@ -29,8 +29,10 @@ Keys of interfaces.md
 Further keys
     ``max_error[dof]``: max |e|.
     ``settling_time[dof]``: the time (s, run clock) of the first tick from
-    which |e| stays within the DOF's band until the end of the run; 0 if it
-    never leaves it; ``null`` if the last tick is outside (not settled). The
+    which |e| stays within the DOF's band until the end of the run; the first
+    tick's time if it never leaves it; ``null`` (not settled) if that last stay
+    in the band is shorter than :data:`SETTLING_HOLD` (5 s), so an oscillation
+    that happens to be inside the band at the end does not count. The
     band (``settling_band[dof]``) is the larger of :data:`SETTLING_FRACTION`
     (2 %) of the reference's span over the run (max - min of eta_d, angles
     unwrapped) and an
@@ -85,6 +87,8 @@ OSCILLATION_WINDOW = 20.0
 SETTLING_FRACTION = 0.02
 #: absolute floor of the settling band per DOF: 10 mm, 0.5 deg.
 SETTLING_FLOOR: tuple[float, ...] = (0.01,) * 3 + (math.radians(0.5),) * 3
+#: s, how long |e| must have stayed in the band at the end of the run to count as settled.
+SETTLING_HOLD = 5.0
 #: relative tolerance of "|thrust_cmd| >= max_thrust".
 SATURATION_RTOL = 1e-9
 #: s, a plant sample and a control tick with stamps this close are the same instant.
@@ -184,7 +188,8 @@ def settling_times(err: ControlErrors) -> tuple[list[float | None], FloatArray]:
         outside = np.flatnonzero(np.abs(err.e[:, k]) > band[k])
         if len(outside) == 0:
             out.append(float(err.t[0]))
-        elif outside[-1] == len(err.t) - 1:
+        elif (outside[-1] == len(err.t) - 1
+              or float(np.max(err.t)) - float(err.t[outside[-1] + 1]) < SETTLING_HOLD - _EDGE):
             out.append(None)
         else:
             out.append(float(err.t[outside[-1] + 1]))
