@@ -224,7 +224,7 @@ def build_section(results: Sequence[tuple[StackConfig, dict[str, Any]]],
         f'servo {robot.tilt_rate_limit * _DEG:g} deg/s except in pitch_hold_slow_servo. '
         f'Final = mean |e| over the last {FINAL_WINDOW:g} s; RMS over the whole run; '
         f'oscillation over the last {OSCILLATION_WINDOW:g} s (definitions: '
-        '`tiltrov_ros/core/metrics.py`).',
+        '`tiltrov_ros/core/metrics.py`). 0 means below 0.0005 in the unit shown.',
         '',
         '**Gains** (`config/wrench_controller.yaml`):',
         '',
