@@ -27,6 +27,10 @@ COMMANDS: dict[str, Command] = {
                                'against baselines measured in the same run)'),
     'bag': Command('.bag.cli', 'look into a bag (info) or repair one whose recorder was killed'),
     'replay': Command('.bag.replay', 'publish a recorded bag into a live graph'),
+    'sim': Command('.simulate', 'run a scenario headless (no ROS): time series, metrics.json, '
+                                'figures'),
+    'report': Command('.report', "run the paper's scenarios with every controller; results "
+                                 'table and figures into README.md'),
 }
 
 

@@ -1,69 +1,99 @@
-"""A one-line progress bar on stderr for long reads (no third-party dependency).
+"""A small progress bar on stderr for long jobs (no dependency).
 
-Shown only on a terminal and only for long jobs, unless forced; redrawn at
-most every ``interval`` seconds so it never slows the loop it reports on.
+Call it with the fraction done (0..1), as :func:`tiltrov_ros.core.runner.run`
+does with its ``progress`` argument::
+
+    with ProgressBar('pitch_hold pd') as bar:
+        log = run_scenario(config, progress=bar)
+
+Nothing is shown for jobs that finish within ``delay`` seconds (1 s), so short
+runs and tests stay quiet. On a terminal the bar is redrawn in place
+(``label [#########           ]  45%  2.1 s``, at most ten times a second); when
+stderr is a file or a pipe, one plain line is written at each quarter instead,
+so logs stay readable.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 import sys
 import time
+from types import TracebackType
 from typing import TextIO
 
 
-class Progress:
-    """``with Progress(total, 'reading bag') as bar: ... bar.update()``.
+class ProgressBar:
+    """Callable progress reporter (see the module docstring).
 
-    Args:
-        total: number of steps (e.g. messages); 0 or less: unknown.
-        label: text in front of the bar.
-        enabled: True to always draw, False never; None: when ``stream`` is a
-            terminal and ``total`` is at least ``min_total``.
-        stream: where to draw (default ``sys.stderr``).
-
+    Parameters
+    ----------
+    label : str
+        Shown before the bar.
+    stream : text stream, optional
+        Default ``sys.stderr``.
+    delay : float
+        Seconds of wall time before anything is shown.
+    width : int
+        Characters of the bar.
+    clock : callable
+        Wall clock in seconds (``time.monotonic``); injectable for tests.
     """
 
-    def __init__(self, total: int, label: str, *, enabled: bool | None = None,
-                 stream: TextIO | None = None, min_total: int = 20_000,
-                 interval: float = 0.2, width: int = 30) -> None:
-        self.total = int(total)
+    def __init__(self, label: str, *, stream: TextIO | None = None, delay: float = 1.0,
+                 width: int = 30, clock: Callable[[], float] = time.monotonic) -> None:
         self.label = label
         self.stream = stream if stream is not None else sys.stderr
-        if enabled is None:
-            enabled = self.total >= min_total and self.stream.isatty()
-        self.enabled = enabled
-        self.count = 0
-        self._interval = interval
-        self._width = width
-        self._start = time.monotonic()
-        self._next_draw = 0.0
+        self.delay = delay
+        self.width = width
+        self._clock = clock
+        self._start = clock()
+        self._last_draw = -1.0
+        self._fraction = 0.0
+        self._quarter = 0
+        self.shown = False
+        self._open_line = False
+        isatty = getattr(self.stream, 'isatty', None)
+        self.interactive = bool(isatty()) if callable(isatty) else False
 
-    def update(self, steps: int = 1) -> None:
-        self.count += steps
-        if self.enabled and time.monotonic() >= self._next_draw:
-            self._draw()
-
-    def _draw(self, end: str = '') -> None:
-        now = time.monotonic()
-        self._next_draw = now + self._interval
+    def __call__(self, fraction: float) -> None:
+        self._fraction = min(max(float(fraction), 0.0), 1.0)
+        now = self._clock()
         elapsed = now - self._start
-        if self.total > 0:
-            fraction = min(1.0, self.count / self.total)
-            filled = round(fraction * self._width)
-            bar = '#' * filled + '-' * (self._width - filled)
-            text = f'{self.label} [{bar}] {fraction:6.1%} {self.count}/{self.total}'
+        if elapsed < self.delay:
+            return
+        if self.interactive:
+            if self._fraction >= 1.0 or now - self._last_draw >= 0.1:
+                self._last_draw = now
+                self._draw(elapsed)
         else:
-            text = f'{self.label} {self.count}'
-        self.stream.write(f'\r{text} {elapsed:5.1f} s{end}')
+            quarter = int(self._fraction * 4 + 1e-9)
+            if quarter > self._quarter:
+                self._quarter = quarter
+                self.shown = True
+                self.stream.write(f'{self.label}: {100 * self._fraction:3.0f}%  '
+                                  f'{elapsed:.1f} s\n')
+                self.stream.flush()
+
+    def _draw(self, elapsed: float) -> None:
+        filled = round(self.width * self._fraction)
+        bar = '#' * filled + ' ' * (self.width - filled)
+        self.stream.write(f'\r{self.label} [{bar}] {100 * self._fraction:3.0f}%  '
+                          f'{elapsed:.1f} s')
         self.stream.flush()
+        self.shown = True
+        self._open_line = True
 
     def close(self) -> None:
-        if self.enabled:
-            self._draw(end='\n')
-            self.enabled = False
+        """End the bar's line (only if something was drawn)."""
+        if self._open_line:
+            self._draw(self._clock() - self._start)
+            self.stream.write('\n')
+            self.stream.flush()
+            self._open_line = False
 
-    def __enter__(self) -> Progress:
+    def __enter__(self) -> ProgressBar:
         return self
 
-    def __exit__(self, *exc: object) -> None:
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
         self.close()

@@ -16,7 +16,6 @@ from tiltrov_ros.bag.msgdefs import typestore
 from tiltrov_ros.bag.reader import SETPOINT, WRENCH, read_runlog, read_series
 from tiltrov_ros.bag.writer import BagWriter
 from tiltrov_ros.core.errors import BagError
-from tiltrov_ros.progress import Progress
 
 STORE = typestore()
 T = STORE.types
@@ -228,14 +227,10 @@ def test_read_series_checks_types_and_sorts_by_stamp(tmp_path: Path) -> None:
         read_series(tmp_path / 'bag', {'/rov1/wrench_cmd': SETPOINT}, progress=False)
 
 
-def test_progress_bar() -> None:
-    out = io.StringIO()
-    with Progress(4, 'reading', enabled=True, stream=out, interval=0.0) as bar:
-        for _ in range(4):
-            bar.update()
-    text = out.getvalue()
-    assert 'reading [' in text and '100.0% 4/4' in text and text.endswith('\n')
-    quiet = io.StringIO()  # not a terminal: automatic mode stays silent
-    with Progress(10**6, 'reading', stream=quiet) as bar:
-        bar.update(10**6)
-    assert quiet.getvalue() == ''
+def test_progress_bar_on_request(tmp_path, capsys) -> None:
+    """progress=True shows the shared stderr bar at once; False shows nothing."""
+    write_bag(tmp_path / 'bag')
+    read_series(tmp_path / 'bag', {'/rov1/wrench_cmd': WRENCH}, progress=True)
+    assert 'reading bag' in capsys.readouterr().err
+    read_series(tmp_path / 'bag', {'/rov1/wrench_cmd': WRENCH}, progress=False)
+    assert capsys.readouterr().err == ''

@@ -41,7 +41,7 @@ from numpy.typing import NDArray
 from ..core.errors import BagError
 from ..core.runlog import CONTROL_FIELDS, PLANT_FIELDS, FloatArray, RunLog
 from ..core.timebase import seconds, stamp_to_ns
-from ..progress import Progress
+from ..progress import ProgressBar
 from .bagfile import bag_info, open_reader
 from .msgdefs import typestore
 from .topics import join_namespace
@@ -189,16 +189,22 @@ def read_series(path: str | Path, decoders: Mapping[str, Decoder], *,
         collected: dict[str, tuple[list[int], list[int], list[Row]]] = {
             c.topic: ([], [], []) for c in connections}
         total = sum(c.msgcount for c in connections)
-        with Progress(total, f'reading {Path(path).name}', enabled=progress) as bar:
-            for conn, log_time, data in (reader.messages(connections=connections)
-                                         if connections else ()):
+        # None: a bar only if the read takes over a second; True: at once.
+        with ProgressBar(f'reading {Path(path).name}',
+                         delay=0.0 if progress else 1.0) as bar:
+            show = progress is not False and total > 0
+            for i, (conn, log_time, data) in enumerate(
+                    reader.messages(connections=connections) if connections else ()):
                 msg: Any = store.deserialize_cdr(data, conn.msgtype)
                 stamps, logs, rows = collected[conn.topic]
                 stamp = msg.header.stamp
                 stamps.append(stamp_to_ns(stamp.sec, stamp.nanosec))
                 logs.append(log_time)
                 rows.append(decoders[conn.topic].extract(msg))
-                bar.update()
+                if show and i % 1024 == 0:
+                    bar(i / total)
+            if show:
+                bar(1.0)
     return {topic: _series(topic, decoders[topic], *parts)
             for topic, parts in collected.items()}
 

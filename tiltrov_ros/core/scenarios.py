@@ -38,7 +38,11 @@ scenario time, s):
 
 The reference gives eta_d and its exact time derivative (the feed-forward of
 ``setpoint_velocity``); as messages carry it, the attitude goes out as a
-quaternion.
+quaternion. At the instant of a kink the rate is a one-sided derivative: a
+ramp's rate is 0 at its start and at its end (the rate of the held pieces), a
+sine's is its own rate at ``start`` and ``end``; a step's jump contributes no
+rate. (Which side is taken matters more than it seems: see README.md, "Known
+limitations", on the allocator holding both pairs at the +-90 deg edge.)
 """
 
 from __future__ import annotations
