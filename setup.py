@@ -17,6 +17,10 @@ package_name = 'tiltrov_ros'
 # lib/tiltrov_ros) and that a venv install puts on PATH.
 console_scripts = [
     'tiltrov = tiltrov_ros.cli:main',
+    'plant_simulator = tiltrov_ros.nodes.plant_simulator:main',
+    'wrench_controller = tiltrov_ros.nodes.wrench_controller:main',
+    'thrust_allocator = tiltrov_ros.nodes.thrust_allocator:main',
+    'reference_publisher = tiltrov_ros.nodes.reference_publisher:main',
 ]
 
 setup(

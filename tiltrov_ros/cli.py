@@ -23,6 +23,8 @@ class Command(NamedTuple):
 COMMANDS: dict[str, Command] = {
     'demo': Command('.demo', "run the full stack on the paper's positioning scenario "
                              '(bag, figures, metrics)'),
+    'launch': Command('.launcher', 'start the ROS stack (plant, controller, allocator, '
+                                   'reference) for a scenario, lockstep or realtime'),
 }
 
 
