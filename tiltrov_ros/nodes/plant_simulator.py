@@ -213,6 +213,7 @@ class PlantSimulator(TiltrovNode):
         self._started = False
         self._commands_seen = False
         self._waiting_since: int | None = None     # steady ns, while waiting at a tick
+        self._stalled = False                      # the present wait is a stall
         self._last_applied = [-1, -1]              # realtime: stamps of the held commands
         self.stalls = 0
         self.startup_retries = 0
@@ -326,6 +327,7 @@ class PlantSimulator(TiltrovNode):
                 for stamp in [s for s in self._pending if s <= t]:
                     del self._pending[stamp]
                 self._waiting_since = None
+                self._stalled = False
             plant.step()
             self._publish_state()
 
@@ -350,6 +352,7 @@ class PlantSimulator(TiltrovNode):
             return
         if waited >= self.config.stall_timeout:
             self.stalls += 1
+            self._stalled = True
             entry = self._pending.get(t, [None, None])
             missing = [name for name, got in zip((THRUST_CMD, TILT_CMD), entry) if got is None]
             self.get_logger().warning(
@@ -433,13 +436,11 @@ class PlantSimulator(TiltrovNode):
             self._rtf_achieved = (t - sim0) / (now - wall0)
         self._diag_mark = (now, t)
         level, message = OK, f'{self.config.mode} at {format_ns(t)}'
-        waiting = (self._waiting_since is not None and self._commands_seen
-                   and (now - self._waiting_since) / 1e9 >= self.config.stall_timeout)
         if not self._started:
             message = f'{self.config.mode}: waiting for the controller and allocator'
         elif self.finished.done():
             message = f'finished at {format_ns(t)}'
-        elif waiting:
+        elif self._stalled:
             level = WARN
             message = f'stalled at {format_ns(t)}: waiting for thrust_cmd/tilt_cmd'
         if self.stalls and level == OK:
