@@ -37,7 +37,7 @@ import math
 import sys
 from typing import Any
 
-from rcl_interfaces.msg import SetParametersResult
+from nav_msgs.msg import Odometry
 from rclpy.duration import Duration
 from rclpy.parameter import Parameter
 from rclpy.task import Future
@@ -199,7 +199,7 @@ class PlantSimulator(TiltrovNode):
         #: Completes (result: final sim time, ns) when ``duration`` is reached.
         self.finished: Future = Future()
 
-        self._odom_pub = self.create_publisher(type(new_odometry()), ODOM, RELIABLE_QOS)
+        self._odom_pub = self.create_publisher(Odometry, ODOM, RELIABLE_QOS)
         self._joint_pub = self.create_publisher(JointState, JOINT_STATES, RELIABLE_QOS)
         self._clock_pub = self.create_publisher(ClockMsg, CLOCK, RELIABLE_QOS)
         self._odom_msg = new_odometry()
@@ -228,7 +228,6 @@ class PlantSimulator(TiltrovNode):
         else:
             self._step_timer = None
             self._start_realtime()
-        self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
         self.start_diagnostics()
         c = self.config
@@ -413,11 +412,8 @@ class PlantSimulator(TiltrovNode):
 
     # -- parameters ------------------------------------------------------------------
 
-    def _validate_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
-        # Ranges, types and read-only are enforced by rclpy from the descriptors.
-        return SetParametersResult(successful=True)
-
     def _apply_parameters(self, parameters: list[Parameter]) -> None:
+        """Run-time changes (ranges, types and read-only are checked by rclpy)."""
         for p in parameters:
             if p.name == 'real_time_factor':
                 self.config = replace(self.config, real_time_factor=float(p.value))

@@ -333,10 +333,6 @@ class ThrustAllocatorNode(TiltrovNode):
         }
 
 
-#: The node class under the executable's name.
-ThrustAllocator = ThrustAllocatorNode
-
-
 def main(args: list[str] | None = None) -> int:
     """``thrust_allocator [--ros-args --params-file config/thrust_allocator.yaml ...]``."""
     return main_loop(ThrustAllocatorNode, args, NODE_NAME)

@@ -25,7 +25,7 @@ controller.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 import sys
 from typing import Any
@@ -426,10 +426,10 @@ class WrenchController(TiltrovNode):
         }
 
 
-def _trim(buffer: Mapping[int, Any]) -> None:
+def _trim(buffer: dict[int, Any]) -> None:
     if len(buffer) > BUFFER:
         for stamp in sorted(buffer)[:len(buffer) - BUFFER]:
-            del buffer[stamp]  # type: ignore[attr-defined]
+            del buffer[stamp]
 
 
 def main(args: list[str] | None = None) -> int:
