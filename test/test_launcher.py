@@ -11,11 +11,13 @@ import sys
 import threading
 import time
 
+import numpy as np
 import pytest
 from ros_stack import MS, Probe
 import yaml
 
 from tiltrov_ros import launcher
+from tiltrov_ros.core.runner import run_scenario, stack_config
 from tiltrov_ros.launcher import LaunchError, LaunchOptions, stack_specs
 
 NODES = ('thrust_allocator', 'wrench_controller', 'reference_publisher', 'plant_simulator')
@@ -207,3 +209,26 @@ def test_single_process_launch_in_a_namespace(ros) -> None:
     assert probe.stamps('thrust_cmd')
     assert root['odom'] == []
     assert 'in /robot1' in stream.getvalue()
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not launcher.recorder_available(),
+                    reason='the bag_recorder node (branch bags) is not in this tree')
+@pytest.mark.parametrize('single_process', [False, True])
+def test_record_gives_a_bag_equal_to_the_headless_run(tmp_path: Path,
+                                                      single_process: bool) -> None:
+    from tiltrov_ros.bag.reader import read_runlog
+
+    bag = tmp_path / 'bag'
+    args = ['--scenario', 'trajectory', '--controller', 'switching', '--duration', '2',
+            '--record', str(bag), '--namespace', 'r1']
+    result = subprocess.run(_tiltrov(*args, *(['--single-process'] if single_process else [])),
+                            capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert result.returncode == 0, result.stdout + result.stderr
+    recorded = read_runlog(bag, namespace='/r1')
+    expected = run_scenario(stack_config('trajectory', 'switching'), duration=2.0)
+    assert recorded.meta['bag']['missing'] == {}
+    for name in ('t', 'position', 'quaternion', 'nu', 'thrust', 'tc', 'wrench_cmd',
+                 'thrust_cmd', 'tilt_cmd', 'wrench_achieved'):
+        np.testing.assert_allclose(getattr(recorded, name), getattr(expected, name),
+                                   rtol=0, atol=1e-9, err_msg=name)

@@ -57,6 +57,8 @@ RECORDER_MODULE = 'tiltrov_ros.nodes.bag_recorder'
 
 #: s (wall) a node gets to exit after SIGINT, then after SIGTERM, before SIGKILL.
 STOP_TIMEOUTS = (5.0, 3.0)
+#: s (wall) the plant waits, once the recorder reads odom, before the initial state.
+RECORDER_STARTUP_DELAY = 0.5
 #: s (wall) the recorder gets to close its bag after SIGINT.
 RECORDER_STOP_TIMEOUT = 20.0
 POLL = 0.05
@@ -188,6 +190,9 @@ def stack_specs(options: LaunchOptions, *, config_dir: Path | None = None,
         'scenario': scenario_param, 'duration': duration, 'exit_at_end': True,
         'startup_subscribers': 1 + (options.record is not None) + extra_odom_readers,
         **robot}
+    if options.record is not None:
+        # The recorder must have matched every writer of the stack, not only odom's.
+        plant['startup_delay'] = RECORDER_STARTUP_DELAY
     if options.stall_timeout is not None:
         plant['stall_timeout'] = float(options.stall_timeout)
     controller = {'controller': kind, 'mode': mode, **sim, **robot}
@@ -441,9 +446,17 @@ def run_processes(specs: Sequence[NodeSpec], namespace: str, out: _Output,
 
 def run_single_process(specs: Sequence[NodeSpec], namespace: str, out: _Output,
                        summary: str, executor_kind: str | None = None) -> int:
-    """Every node in this process on one executor (see ``nodes.common.make_executor``)."""
+    """Every node in this process, bound to one context.
+
+    The stack nodes share one executor (``nodes.common.make_executor``). The
+    recorder, if any, spins on its own SingleThreadedExecutor in a second
+    thread: it takes queued messages itself inside its callbacks, which the
+    EventsExecutor (one take per event) does not allow, and it stays off the
+    stack's critical path.
+    """
     import rclpy
     from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
 
     from tiltrov_ros.nodes.common import STARTUP_ERRORS, make_executor, spin_until
@@ -452,6 +465,8 @@ def run_single_process(specs: Sequence[NodeSpec], namespace: str, out: _Output,
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
     nodes: list[Any] = []
     executor = None
+    side: Any = None
+    side_thread: threading.Thread | None = None
     started = time.monotonic()
     try:
         try:
@@ -459,10 +474,17 @@ def run_single_process(specs: Sequence[NodeSpec], namespace: str, out: _Output,
         except STARTUP_ERRORS as exc:
             out.line('launch', f'cannot start the stack: {exc}')
             return EXIT_FAILED
-        plant = next(n for n, s in zip(nodes, specs) if s.name == PLANT)
+        by_name = {s.name: n for n, s in zip(nodes, specs)}
+        plant = by_name[PLANT]
         executor = make_executor(context, executor_kind)
-        for node in nodes:
-            executor.add_node(node)
+        for name, node in by_name.items():
+            if name != RECORDER:
+                executor.add_node(node)
+        if RECORDER in by_name:
+            side = SingleThreadedExecutor(context=context)
+            side.add_node(by_name[RECORDER])
+            side_thread = threading.Thread(target=side.spin, name=RECORDER, daemon=True)
+            side_thread.start()
         try:
             spin_until(executor, context, plant.finished.done)
         except KeyboardInterrupt:
@@ -473,6 +495,10 @@ def run_single_process(specs: Sequence[NodeSpec], namespace: str, out: _Output,
     finally:
         if executor is not None:
             executor.shutdown()
+        if side is not None:
+            side.shutdown()
+        if side_thread is not None:
+            side_thread.join(timeout=10.0)
         # The recorder (first in start order) is destroyed last: it drains its queues.
         for node in reversed(nodes):
             node.destroy_node()

@@ -15,7 +15,8 @@ Modes (parameter ``mode``):
   t_i, which it applies before stepping (zero-order hold until the next
   tick), exactly as :func:`tiltrov_ros.core.runner.run` does. Before the
   initial state it waits until ``startup_subscribers`` readers are matched on
-  ``odom`` and both command topics have a publisher. If the commands of a tick
+  ``odom`` and both command topics have a publisher, then ``startup_delay``
+  wall seconds more. If the commands of a tick
   have not come after ``stall_timeout`` wall seconds, the wait is reported on
   ``/diagnostics`` as a stall and the state at t_i (joint_states, odom, clock)
   is published again, so a lost message or a restarted controller resumes the
@@ -111,6 +112,7 @@ class PlantConfig:
     exit_at_end: bool
     stall_timeout: float             # s, wall
     startup_subscribers: int
+    startup_delay: float             # s, wall
 
     def build_plant(self) -> Plant:
         """The plant at the initial state, as ``StackConfig.build_plant`` makes it."""
@@ -156,6 +158,10 @@ def declare_parameters(node: TiltrovNode) -> PlantConfig:
     startup_subscribers = d('startup_subscribers', 1, descriptor(
         'lockstep: odom readers to wait for before publishing the initial state',
         read_only=True, integer=(0, 1000))).value
+    startup_delay = d('startup_delay', 0.0, descriptor(
+        'lockstep: wall seconds to wait once the readers are there, so that every other '
+        'pair of endpoints (e.g. a bag recorder and the allocator) is matched too',
+        read_only=True, floating=(0.0, 60.0))).value
     robot, period = declare_robot(node)
     node.check_overrides()
 
@@ -182,7 +188,8 @@ def declare_parameters(node: TiltrovNode) -> PlantConfig:
         disturbances=disturbances,
         initial_state=scenario.initial_state if scenario is not None else InitialState(),
         scenario=scenario_name, duration_ns=duration_ns, exit_at_end=bool(exit_at_end),
-        stall_timeout=float(stall_timeout), startup_subscribers=int(startup_subscribers))
+        stall_timeout=float(stall_timeout), startup_subscribers=int(startup_subscribers),
+        startup_delay=float(startup_delay))
 
 
 class PlantSimulator(TiltrovNode):
@@ -211,6 +218,7 @@ class PlantSimulator(TiltrovNode):
         # lockstep: tick ns -> [thrusts, tilts] (None: not yet; _REJECTED: bad message)
         self._pending: dict[int, list[list[float] | None]] = {}
         self._started = False
+        self._peers_since: int | None = None       # steady ns when the peers were there
         self._commands_seen = False
         self._waiting_since: int | None = None     # steady ns, while waiting at a tick
         self._stalled = False                      # the present wait is a stall
@@ -333,7 +341,13 @@ class PlantSimulator(TiltrovNode):
     @guarded
     def _watchdog(self) -> None:
         if not self._started:
-            if self._peers_ready():
+            if not self._peers_ready():
+                self._peers_since = None
+                return
+            now = self.steady_ns()
+            if self._peers_since is None:
+                self._peers_since = now
+            if (now - self._peers_since) / 1e9 >= self.config.startup_delay:
                 self._started = True
                 self._publish_state()
                 self._advance()
