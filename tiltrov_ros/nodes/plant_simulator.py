@@ -4,7 +4,7 @@ Subscribes ``thrust_cmd`` (thruster_1..4, effort N) and ``tilt_cmd``
 (tilt_front, tilt_rear, position rad) and hands them to the actuator models
 (``Plant.command``); publishes at every plant step, stamped with the sim time
 t_i in integer ns (the first message is the initial state at t = 0):
-``joint_states``, then ``odom``, then ``/clock`` (so whoever sees the clock at
+``odom``, then ``joint_states``, then ``/clock`` (so whoever sees the clock at
 t_i knows the state at t_i is out).
 
 Modes (parameter ``mode``):
@@ -22,7 +22,9 @@ Modes (parameter ``mode``):
   is published again, so a lost message or a restarted controller resumes the
   run; every node of the stack answers a repeated stamp idempotently.
 * ``realtime``: a wall-clock timer steps the plant ``real_time_factor`` times
-  faster than real time; the latest command (by stamp) is in force.
+  faster than real time; the latest command (by stamp) is in force. Time
+  starts once ``startup_subscribers`` readers are matched on ``odom`` (0: at
+  once), so a controller started with the plant is there from t = 0.
 
 With ``duration`` > 0 the plant stops at that sim time (after publishing the
 state at ``duration``) and :attr:`PlantSimulator.finished` completes; with
@@ -156,10 +158,10 @@ def declare_parameters(node: TiltrovNode) -> PlantConfig:
         'lockstep: wall seconds without the commands of a tick before a stall is '
         'reported and the tick\'s state published again', floating=(0.01, 3600.0))).value
     startup_subscribers = d('startup_subscribers', 1, descriptor(
-        'lockstep: odom readers to wait for before publishing the initial state',
-        read_only=True, integer=(0, 1000))).value
+        'odom readers to wait for before publishing the initial state (realtime: before '
+        'time starts); 0: start at once', read_only=True, integer=(0, 1000))).value
     startup_delay = d('startup_delay', 0.0, descriptor(
-        'lockstep: wall seconds to wait once the readers are there, so that every other '
+        'wall seconds to wait once the readers are there, so that every other '
         'pair of endpoints (e.g. a bag recorder and the allocator) is matched too',
         read_only=True, floating=(0.0, 60.0))).value
     robot, period = declare_robot(node)
@@ -218,6 +220,7 @@ class PlantSimulator(TiltrovNode):
         # lockstep: tick ns -> [thrusts, tilts] (None: not yet; _REJECTED: bad message)
         self._pending: dict[int, list[list[float] | None]] = {}
         self._started = False
+        self._started_at = 0                       # steady ns of the initial state
         self._peers_since: int | None = None       # steady ns when the peers were there
         self._commands_seen = False
         self._waiting_since: int | None = None     # steady ns, while waiting at a tick
@@ -231,11 +234,9 @@ class PlantSimulator(TiltrovNode):
         self._diag_mark = (self.steady_ns(), self.plant.time_ns)
         self._rtf_achieved = 0.0
 
-        if self.lockstep:
-            self.create_timer(WATCHDOG_PERIOD, self._watchdog, clock=self.steady)
-        else:
-            self._step_timer = None
-            self._start_realtime()
+        self._step_timer = None
+        self._watchdog_timer = self.create_timer(WATCHDOG_PERIOD, self._watchdog,
+                                                 clock=self.steady)
         self.add_post_set_parameters_callback(self._apply_parameters)
         self.start_diagnostics()
         c = self.config
@@ -248,15 +249,16 @@ class PlantSimulator(TiltrovNode):
     # -- state out -----------------------------------------------------------------
 
     def _publish_state(self) -> None:
+        """``odom`` (first: the controller's input), ``joint_states``, then ``/clock``."""
         s = self.plant.sample()
         ns = s.t_ns
+        self._odom_pub.publish(fill_odometry(self._odom_msg, ns, s.position, s.quaternion,
+                                             s.nu))
         fill_joint_state(self._joint_msg, ns,
                          position=(*s.tilts, NAN, NAN, NAN, NAN),
                          velocity=(*s.tilt_velocities, NAN, NAN, NAN, NAN),
                          effort=(NAN, NAN, *s.thrusts))
         self._joint_pub.publish(self._joint_msg)
-        self._odom_pub.publish(fill_odometry(self._odom_msg, ns, s.position, s.quaternion,
-                                             s.nu))
         set_stamp(self._clock_msg.clock, ns)
         self._clock_pub.publish(self._clock_msg)
 
@@ -267,9 +269,12 @@ class PlantSimulator(TiltrovNode):
     def _finish(self) -> None:
         if not self.finished.done():
             self._waiting_since = None
-            self.get_logger().info(f'reached the end of the run at '
-                                   f'{format_ns(self.plant.time_ns)}')
-            self.finished.set_result(self.plant.time_ns)
+            t = self.plant.time_ns
+            wall = (self.steady_ns() - self._started_at) / 1e9
+            self.get_logger().info(
+                f'reached the end of the run at {format_ns(t)}: {wall:.3f} s wall since '
+                f'the initial state, real-time factor {seconds(t) / max(wall, 1e-9):.2f}')
+            self.finished.set_result(t)
 
     # -- commands in ---------------------------------------------------------------
 
@@ -347,10 +352,16 @@ class PlantSimulator(TiltrovNode):
             now = self.steady_ns()
             if self._peers_since is None:
                 self._peers_since = now
-            if (now - self._peers_since) / 1e9 >= self.config.startup_delay:
-                self._started = True
-                self._publish_state()
-                self._advance()
+            if (now - self._peers_since) / 1e9 < self.config.startup_delay:
+                return
+            if not self.lockstep:
+                self.destroy_timer(self._watchdog_timer)
+                self._start_realtime()
+                return
+            self._started = True
+            self._started_at = now
+            self._publish_state()
+            self._advance()
             return
         since = self._waiting_since
         if since is None or self.finished.done():
@@ -380,14 +391,17 @@ class PlantSimulator(TiltrovNode):
         self._publish_state()
 
     def _peers_ready(self) -> bool:
-        return (self._odom_pub.get_subscription_count() >= self.config.startup_subscribers
-                and self.count_publishers(THRUST_CMD) > 0
-                and self.count_publishers(TILT_CMD) > 0)
+        """lockstep: the odom readers and both command publishers; realtime: the readers."""
+        if self._odom_pub.get_subscription_count() < self.config.startup_subscribers:
+            return False
+        return not self.lockstep or (self.count_publishers(THRUST_CMD) > 0
+                                     and self.count_publishers(TILT_CMD) > 0)
 
     # -- realtime --------------------------------------------------------------------
 
     def _start_realtime(self) -> None:
         self._started = True
+        self._started_at = self.steady_ns()
         self._publish_state()
         self._rebase()
         self._make_step_timer()
