@@ -486,7 +486,7 @@ def run_single_process(specs: Sequence[NodeSpec], namespace: str, out: _Output,
             side_thread = threading.Thread(target=side.spin, name=RECORDER, daemon=True)
             side_thread.start()
         try:
-            spin_until(executor, context, plant.finished.done)
+            spin_until(executor, context, plant.finished)
         except KeyboardInterrupt:
             out.line('launch', 'SIGINT: stopping every node')
             return EXIT_INTERRUPTED
