@@ -163,27 +163,43 @@ def _alive(pid: int) -> bool:
     return True
 
 
+def _cleanup(process: subprocess.Popen[str], pids: dict[str, int]) -> None:
+    """Whatever a failed test left running: the launcher and the nodes it started."""
+    if process.poll() is None:
+        process.kill()
+        process.wait(timeout=10)
+    for pid in pids.values():
+        if _alive(pid):
+            os.kill(pid, signal.SIGKILL)
+
+
 @pytest.mark.slow
 def test_a_node_dying_mid_run_stops_the_others(tmp_path: Path) -> None:
     process, pids = _start(tmp_path, '--realtime', '--duration', '600')
-    assert set(pids) == set(NODES)
-    os.kill(pids['wrench_controller'], signal.SIGKILL)
-    out, _ = process.communicate(timeout=60)
-    assert process.returncode == 1
-    assert f'wrench_controller died (exit code {-signal.SIGKILL})' in out
-    assert not any(_alive(pid) for pid in pids.values())
+    try:
+        assert set(pids) == set(NODES)
+        os.kill(pids['wrench_controller'], signal.SIGKILL)
+        out, _ = process.communicate(timeout=60)
+        assert process.returncode == 1
+        assert f'wrench_controller died (exit code {-signal.SIGKILL})' in out
+        assert not any(_alive(pid) for pid in pids.values())
+    finally:
+        _cleanup(process, pids)
 
 
 @pytest.mark.slow
 def test_ctrl_c_stops_every_node_cleanly(tmp_path: Path) -> None:
     process, pids = _start(tmp_path, '--realtime', '--duration', '600')
-    time.sleep(0.5)
-    process.send_signal(signal.SIGINT)
-    out, _ = process.communicate(timeout=60)
-    assert process.returncode == 130, out
-    assert 'SIGINT: stopping every node' in out
-    assert 'SIGTERM' not in out and 'SIGKILL' not in out     # SIGINT was enough
-    assert not any(_alive(pid) for pid in pids.values())
+    try:
+        time.sleep(0.5)
+        process.send_signal(signal.SIGINT)
+        out, _ = process.communicate(timeout=60)
+        assert process.returncode == 130, out
+        assert 'SIGINT: stopping every node' in out
+        assert 'SIGTERM' not in out and 'SIGKILL' not in out     # SIGINT was enough
+        assert not any(_alive(pid) for pid in pids.values())
+    finally:
+        _cleanup(process, pids)
 
 
 # --------------------------------------------------------------------------- in process

@@ -360,8 +360,12 @@ class _Stop(Exception):
     """Raised by the signal handler to leave the wait loop."""
 
 
-def _stop_children(children: Sequence[_Child], out: _Output) -> None:
-    """SIGINT the stack nodes, then the recorder; escalate to SIGTERM and SIGKILL."""
+def _stop_children(children: Sequence[_Child], out: _Output,
+                   hurry: threading.Event | None = None) -> None:
+    """SIGINT the stack nodes, then the recorder; escalate to SIGTERM and SIGKILL.
+
+    ``hurry`` set (a second Ctrl-C) cuts every wait short.
+    """
     stack = [c for c in children if c.spec.name != RECORDER]
     recorder = [c for c in children if c.spec.name == RECORDER]
     for group, first_timeout in ((stack, STOP_TIMEOUTS[0]),
@@ -378,8 +382,8 @@ def _stop_children(children: Sequence[_Child], out: _Output) -> None:
                 with contextlib.suppress(ProcessLookupError):
                     child.process.send_signal(sig)
             deadline = time.monotonic() + timeout
-            while time.monotonic() < deadline and any(c.process.poll() is None
-                                                      for c in alive):
+            while (time.monotonic() < deadline and not (hurry and hurry.is_set())
+                   and any(c.process.poll() is None for c in alive)):
                 time.sleep(POLL)
     for child in children:
         child.pump.join(timeout=2.0)
@@ -394,7 +398,14 @@ def run_processes(specs: Sequence[NodeSpec], namespace: str, out: _Output,
     children: list[_Child] = []
     previous = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
 
+    stopping = threading.Event()
+    hurry = threading.Event()
+
     def on_signal(signum: int, frame: Any) -> None:
+        if stopping.is_set():       # already stopping: a second Ctrl-C hurries it
+            hurry.set()
+            return
+        stopping.set()
         raise _Stop(signal.Signals(signum).name)
 
     started = time.monotonic()
@@ -433,8 +444,9 @@ def run_processes(specs: Sequence[NodeSpec], namespace: str, out: _Output,
         code = EXIT_INTERRUPTED
         return code
     finally:
+        stopping.set()              # from here on a signal only hurries the stop
         try:
-            _stop_children(children, out)
+            _stop_children(children, out, hurry)
         finally:
             for sig, handler in previous.items():
                 signal.signal(sig, handler)
