@@ -165,8 +165,9 @@ def stack_specs(options: LaunchOptions, *, config_dir: Path | None = None,
     probe) that the plant should wait for in lockstep.
     """
     config, duration = resolve(options)
-    scenario_param = (config.scenario.source if Path(options.scenario).suffix
-                      else options.scenario) or options.scenario
+    # A name stays a name; a file is passed as an absolute path.
+    scenario_param = (str(Path(options.scenario).resolve()) if Path(options.scenario).suffix
+                      else options.scenario)
 
     def files(node: str) -> tuple[Path, ...]:
         if config_dir is not None:
