@@ -24,6 +24,7 @@ numbers as a dict and prints a table.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import re
 import subprocess
@@ -93,10 +94,12 @@ def latency(seconds_of_sim: float, real_time_factor: float,
 
     from tiltrov_ros.nodes.common import ODOM, THRUST_CMD, WRENCH_CMD, stamp_ns
 
-    context = Context()
-    rclpy.init(context=context)
-    node = rclpy.create_node('latency_probe', context=context)
-    qos = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_ALL)
+    args = ['--scenario', 'pitch_hold', '--realtime', '--real-time-factor',
+            repr(float(real_time_factor)), '--duration', repr(seconds_of_sim),
+            # The plant starts the clock once the controller and this probe read odom.
+            '--param', 'plant_simulator:startup_subscribers:=2']
+    if single_process:
+        args.append('--single-process')
     # topic -> stamp -> (source timestamp, reception timestamp), ns
     times: dict[str, dict[int, tuple[int, int]]] = {'odom': {}, 'wrench': {}, 'thrust': {}}
 
@@ -107,28 +110,39 @@ def latency(seconds_of_sim: float, real_time_factor: float,
                                     int(info['received_timestamp'])))
         return callback
 
+    # The probe's participant is created while the nodes start: without multicast,
+    # participants created far apart in time find each other only at the next
+    # periodic announcement (Fast DDS: 3 s), see README.md, "Lockstep and realtime".
+    launch = subprocess.Popen(_launch_argv(*args), stdout=subprocess.PIPE,
+                              stderr=subprocess.STDOUT, text=True, cwd=tempfile.gettempdir())
+    time.sleep(0.3)
+    context = Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node('latency_probe', context=context)
+    qos = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_ALL)
     node.create_subscription(Odometry, ODOM, keep('odom'), qos)
     node.create_subscription(WrenchStamped, WRENCH_CMD, keep('wrench'), qos)
     node.create_subscription(JointState, THRUST_CMD, keep('thrust'), qos)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
-    spinning = threading.Thread(target=executor.spin, daemon=True)
-    spinning.start()
-    args = ['--scenario', 'pitch_hold', '--realtime', '--real-time-factor',
-            repr(float(real_time_factor)), '--duration', repr(seconds_of_sim),
-            # The plant starts the clock once the controller and this probe read odom.
-            '--param', 'plant_simulator:startup_subscribers:=2']
-    if single_process:
-        args.append('--single-process')
+    lines: list[str] = []
+    reader = threading.Thread(target=lambda: lines.extend(launch.stdout or ()), daemon=True)
+    reader.start()
     try:
-        result = subprocess.run(_launch_argv(*args), capture_output=True, text=True,
-                                timeout=600, cwd=tempfile.gettempdir())
-        if result.returncode != 0:
-            raise RuntimeError(f'realtime launch failed:\n{result.stdout[-3000:]}')
-        time.sleep(0.2)
+        while launch.poll() is None:
+            executor.spin_once(timeout_sec=0.05)
+        reader.join(timeout=5.0)
+        output = ''.join(lines)
+        if launch.returncode != 0:
+            raise RuntimeError(f'realtime launch failed:\n{output[-3000:]}')
+        deadline = time.monotonic() + 0.2
+        while time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.02)
     finally:
+        if launch.poll() is None:
+            launch.kill()
+            launch.wait()
         executor.shutdown()
-        spinning.join(timeout=5.0)
         node.destroy_node()
         rclpy.try_shutdown(context=context)
     odom, wrench, thrust = times['odom'], times['wrench'], times['thrust']
@@ -140,8 +154,8 @@ def latency(seconds_of_sim: float, real_time_factor: float,
     allocator = [(thrust[t][0] - wrench[t][0]) / 1e6 for t in thrust if t in wrench]
     return {'samples': float(samples.size), 'median_ms': float(np.median(samples)),
             'p99_ms': float(np.percentile(samples, 99)), 'max_ms': float(samples.max()),
-            'controller_median_ms': float(np.median(controller)),
-            'allocator_median_ms': float(np.median(allocator))}
+            'controller_median_ms': float(np.median(controller)) if controller else math.nan,
+            'allocator_median_ms': float(np.median(allocator)) if allocator else math.nan}
 
 
 def main(argv: list[str] | None = None) -> dict[str, float]:
