@@ -110,12 +110,18 @@ def latency(seconds_of_sim: float, real_time_factor: float,
                                     int(info['received_timestamp'])))
         return callback
 
-    # The probe's participant is created while the nodes start: without multicast,
-    # participants created far apart in time find each other only at the next
-    # periodic announcement (Fast DDS: 3 s), see README.md, "Lockstep and realtime".
+    # The probe's participant is created while the nodes start (once the launcher has
+    # started the plant's process): without multicast, participants created far apart
+    # in time find each other only at the next periodic announcement (Fast DDS: 3 s),
+    # see README.md, "Lockstep and realtime".
     launch = subprocess.Popen(_launch_argv(*args), stdout=subprocess.PIPE,
                               stderr=subprocess.STDOUT, text=True, cwd=tempfile.gettempdir())
-    time.sleep(0.3)
+    lines: list[str] = []
+    assert launch.stdout is not None
+    for line in launch.stdout:
+        lines.append(line)
+        if 'started plant_simulator' in line or '[plant_simulator]' in line:
+            break
     context = Context()
     rclpy.init(context=context)
     node = rclpy.create_node('latency_probe', context=context)
@@ -125,7 +131,6 @@ def latency(seconds_of_sim: float, real_time_factor: float,
     node.create_subscription(JointState, THRUST_CMD, keep('thrust'), qos)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
-    lines: list[str] = []
     reader = threading.Thread(target=lambda: lines.extend(launch.stdout or ()), daemon=True)
     reader.start()
     try:
@@ -169,7 +174,9 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     parser.add_argument('--latency-duration', type=float, default=20.0,
                         help='sim seconds of the realtime latency run (default 20)')
     parser.add_argument('--latency-rtf', type=float, default=1.0)
-    parser.add_argument('--skip-latency', action='store_true')
+    parser.add_argument('--latency-runs', default='separate,single',
+                        help='comma-separated: separate (processes), single (process); '
+                             'empty: no latency run')
     args = parser.parse_args(argv)
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
@@ -195,8 +202,11 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     print(f"{'run':<42} {'wall s (launch)':>16} {'RTF':>7} {'/headless':>10}")
     for row in rows:
         print(f'{row[0]:<42} {row[1]:>16} {row[2]:>7} {row[3]:>10}')
-    if not args.skip_latency:
-        for label, single in (('separate processes', False), ('--single-process', True)):
+    runs_wanted = {r for r in args.latency_runs.split(',') if r}
+    if runs_wanted - {'separate', 'single'}:
+        parser.error(f'--latency-runs: unknown {sorted(runs_wanted - {"separate", "single"})}')
+    for label, single in (('separate processes', False), ('--single-process', True)):
+        if ('single' if single else 'separate') in runs_wanted:
             lat = latency(args.latency_duration, args.latency_rtf, single_process=single)
             prefix = 'latency_single_process_' if single else 'latency_'
             out.update({f'{prefix}{k}': v for k, v in lat.items()})
