@@ -26,7 +26,6 @@ from collections.abc import Iterable, Mapping, Sequence
 import contextlib
 from dataclasses import dataclass, field
 import importlib
-import importlib.util
 import json
 import os
 from pathlib import Path
