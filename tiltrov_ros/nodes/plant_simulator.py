@@ -36,7 +36,6 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
-import math
 import sys
 from typing import Any
 
@@ -54,6 +53,8 @@ from tiltrov_ros.core.params import RobotParams
 from tiltrov_ros.core.plant import Plant
 from tiltrov_ros.core.scenarios import InitialState, Scenario, load_scenario
 from tiltrov_ros.core.timebase import seconds, to_ns
+from tiltrov_ros.core.validation import InvalidInput
+from tiltrov_ros.core.validation import stamp_ns as checked_stamp_ns
 
 from .common import (
     CLOCK,
@@ -78,16 +79,18 @@ from .common import (
     fill_odometry,
     format_ns,
     guarded,
-    joint_values,
+    input_callback,
+    joint_state_values,
     main_loop,
     new_joint_state,
     new_odometry,
     set_stamp,
-    stamp_ns,
 )
 
 NODE_NAME = 'plant_simulator'
-NAN = math.nan
+#: joint_states value of a field a joint does not have (thruster position and
+#: velocity, servo effort): 0.0, since no topic carries NaN (README.md, "Reliability").
+NO_VALUE = 0.0
 #: s (wall): how often the lockstep watchdog looks at the start-up and stall state.
 WATCHDOG_PERIOD = 0.05
 #: s (wall): re-publication period of the initial state until the first commands come.
@@ -167,6 +170,7 @@ def declare_parameters(node: TiltrovNode) -> PlantConfig:
         'wall seconds to wait once the readers are there, so that every other '
         'pair of endpoints (e.g. a bag recorder and the allocator) is matched too',
         read_only=True, floating=(0.0, 60.0))).value
+    node.declare_stamp_bounds()
     robot, period = declare_robot(node)
     node.check_overrides()
 
@@ -211,9 +215,10 @@ class PlantSimulator(TiltrovNode):
         #: Completes (result: final sim time, ns) when ``duration`` is reached.
         self.finished: Future = Future()
 
-        self._odom_pub = self.create_publisher(Odometry, ODOM, RELIABLE_QOS)
-        self._joint_pub = self.create_publisher(JointState, JOINT_STATES, RELIABLE_QOS)
-        self._clock_pub = self.create_publisher(ClockMsg, CLOCK, RELIABLE_QOS)
+        # Guarded: a non-finite state (a diverged integration) is withheld and counted.
+        self._odom_pub = self.create_safe_publisher(Odometry, ODOM, RELIABLE_QOS)
+        self._joint_pub = self.create_safe_publisher(JointState, JOINT_STATES, RELIABLE_QOS)
+        self._clock_pub = self.create_safe_publisher(ClockMsg, CLOCK, RELIABLE_QOS)
         self._odom_msg = new_odometry()
         self._joint_msg = new_joint_state(TILTS + THRUSTERS)
         self._clock_msg = ClockMsg()
@@ -232,7 +237,6 @@ class PlantSimulator(TiltrovNode):
         self.stalls = 0
         self.startup_retries = 0
         self.republished = 0
-        self.rejected_messages = 0
         self.overruns = 0
         self._diag_mark = (self.steady_ns(), self.plant.time_ns)
         self._rtf_achieved = 0.0
@@ -258,9 +262,9 @@ class PlantSimulator(TiltrovNode):
         self._odom_pub.publish(fill_odometry(self._odom_msg, ns, s.position, s.quaternion,
                                              s.nu))
         fill_joint_state(self._joint_msg, ns,
-                         position=(*s.tilts, NAN, NAN, NAN, NAN),
-                         velocity=(*s.tilt_velocities, NAN, NAN, NAN, NAN),
-                         effort=(NAN, NAN, *s.thrusts))
+                         position=(*s.tilts, NO_VALUE, NO_VALUE, NO_VALUE, NO_VALUE),
+                         velocity=(*s.tilt_velocities, NO_VALUE, NO_VALUE, NO_VALUE, NO_VALUE),
+                         effort=(NO_VALUE, NO_VALUE, *s.thrusts))
         self._joint_pub.publish(self._joint_msg)
         set_stamp(self._clock_msg.clock, ns)
         self._clock_pub.publish(self._clock_msg)
@@ -281,37 +285,48 @@ class PlantSimulator(TiltrovNode):
 
     # -- commands in ---------------------------------------------------------------
 
-    @guarded
+    def clock_ns(self) -> int | None:
+        """The plant's clock is its own sim time (stamp bounds are relative to it)."""
+        return self.plant.time_ns
+
+    @input_callback(THRUST_CMD)
     def _on_thrust_cmd(self, msg: JointState) -> None:
         self._on_command(0, msg, THRUSTERS, 'effort')
 
-    @guarded
+    @input_callback(TILT_CMD)
     def _on_tilt_cmd(self, msg: JointState) -> None:
         self._on_command(1, msg, TILTS, 'position')
 
     def _on_command(self, kind: int, msg: JointState, names: tuple[str, ...],
                     field: str) -> None:
-        ns = stamp_ns(msg.header.stamp)
-        values = joint_values(msg, names, field)
-        if values is None:
-            self.rejected_messages += 1
-            self.get_logger().warning(
-                f'rejected a {("thrust_cmd", "tilt_cmd")[kind]} stamped {format_ns(ns)}: '
-                f'needs finite {field} for {", ".join(names)}; the previous command holds',
-                throttle_duration_sec=THROTTLE)
         self._commands_seen = True
+        stamp = msg.header.stamp
+        if self.lockstep and (checked_stamp_ns(stamp.sec, stamp.nanosec) < self.plant.time_ns
+                              or self.finished.done()):
+            return   # a re-published answer to a tick already passed
+        ns = self.check_header(msg.header, None)
+        values = joint_state_values(msg, names, field)
         if not self.lockstep:
-            if values is not None and ns >= self._last_applied[kind]:
+            if ns >= self._last_applied[kind]:
                 self._last_applied[kind] = ns
                 self._command(kind, values)
             return
-        if ns < self.plant.time_ns or self.finished.done():
-            return   # a re-published answer to a tick already passed
+        self._hold(ns, kind, values)
+
+    def _hold(self, ns: int, kind: int, values: list[float]) -> None:
+        """lockstep: keep the command for tick ``ns`` (``_REJECTED``: answered, but the
+        previous command holds) and advance if the present tick is complete."""
         entry = self._pending.setdefault(ns, [None, None])
-        entry[kind] = values if values is not None else _REJECTED
+        entry[kind] = values
         if len(self._pending) > MAX_PENDING:     # commands for ticks far ahead: nonsense
             del self._pending[max(self._pending)]
         self._advance()
+
+    def on_rejected(self, topic: str, bad: InvalidInput, stamp: int | None) -> None:
+        """A rejected command leaves the previous one in force. In lockstep one with a
+        valid stamp still answers its tick (the run goes on); a bad stamp answers none."""
+        if self.lockstep and stamp is not None and not self.finished.done():
+            self._hold(stamp, 0 if topic == THRUST_CMD else 1, _REJECTED)
 
     def _command(self, kind: int, values: list[float]) -> None:
         if kind == 0:
@@ -480,7 +495,6 @@ class PlantSimulator(TiltrovNode):
             'real_time_factor_achieved': self._rtf_achieved,
             'stalls': self.stalls, 'startup_retries': self.startup_retries,
             'republished_states': self.republished, 'overruns': self.overruns,
-            'rejected_command_messages': self.rejected_messages,
             'rejected_thrust_commands': plant.thrusters.rejected,
             'rejected_tilt_commands': plant.servos.rejected,
             'finished': self.finished.done(),

@@ -44,8 +44,10 @@ from tiltrov_ros.core.allocation import (
     load_allocator_config,
 )
 from tiltrov_ros.core.errors import ParameterError
+from tiltrov_ros.core.validation import InvalidInput, check_finite, limit_command
 
 from .common import (
+    FRAME_BODY,
     OK,
     RELIABLE_QOS,
     THROTTLE,
@@ -66,7 +68,8 @@ from .common import (
     fill_wrench,
     format_ns,
     guarded,
-    joint_values,
+    input_callback,
+    joint_state_values,
     main_loop,
     new_joint_state,
     new_wrench,
@@ -100,10 +103,16 @@ class ThrustAllocatorNode(TiltrovNode):
         self._declare_parameters()
         self.allocator = self.allocator_config.build(self.robot, self.control_period)
 
-        self._achieved_pub = self.create_publisher(WrenchStamped, WRENCH_ACHIEVED,
-                                                   RELIABLE_QOS)
-        self._tilt_pub = self.create_publisher(JointState, TILT_CMD, RELIABLE_QOS)
-        self._thrust_pub = self.create_publisher(JointState, THRUST_CMD, RELIABLE_QOS)
+        # Guarded: a non-finite message is replaced by the same part of the safe answer.
+        self._achieved_pub = self.create_safe_publisher(
+            WrenchStamped, WRENCH_ACHIEVED, RELIABLE_QOS,
+            lambda msg: self._safe_msgs(stamp_ns(msg.header.stamp))[0])
+        self._tilt_pub = self.create_safe_publisher(
+            JointState, TILT_CMD, RELIABLE_QOS,
+            lambda msg: self._safe_msgs(stamp_ns(msg.header.stamp))[1])
+        self._thrust_pub = self.create_safe_publisher(
+            JointState, THRUST_CMD, RELIABLE_QOS,
+            lambda msg: self._safe_msgs(stamp_ns(msg.header.stamp))[2])
         self.create_subscription(WrenchStamped, WRENCH_CMD, self._on_wrench, RELIABLE_QOS)
         if self.tilt_request_mode != 'ignored':
             self.create_subscription(JointState, TILT_REQUEST, self._on_tilt_request,
@@ -125,7 +134,8 @@ class ThrustAllocatorNode(TiltrovNode):
         self.republished = 0
         self.stale_requests = 0
         self.dropped = 0
-        self.rejected_messages = 0
+        self.out_of_limits = 0
+        self.safe_answers = 0
         self.resets = 0
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
@@ -156,6 +166,7 @@ class ThrustAllocatorNode(TiltrovNode):
         self.input_timeout = d('input_timeout', 1.0, descriptor(
             'wall seconds a wrench waits for its tilt_request before the latest one is '
             'used', floating=(0.001, 3600.0))).value
+        self.declare_stamp_bounds()
         self.robot, self.control_period = declare_robot(self)
         self.check_overrides()
         if self.tilt_request_mode not in TILT_REQUEST_MODES:
@@ -192,9 +203,9 @@ class ThrustAllocatorNode(TiltrovNode):
                     or self.count_publishers(TILT_REQUEST) > 0)
         return self.tilt_request_mode == 'required'
 
-    @guarded
+    @input_callback(WRENCH_CMD)
     def _on_wrench(self, msg: WrenchStamped) -> None:
-        ns = stamp_ns(msg.header.stamp)
+        ns = self.check_header(msg.header, FRAME_BODY)
         if ns == self._last_ns and self._last_msgs is not None:
             self.republished += 1
             self._publish(*self._last_msgs)
@@ -203,11 +214,7 @@ class ThrustAllocatorNode(TiltrovNode):
             self._reset(f'wrench_cmd went back from {format_ns(self._last_ns)} to '
                         f'{format_ns(ns)}')
         wrench = wrench_array(msg)
-        if not np.all(np.isfinite(wrench)):
-            self.rejected_messages += 1
-            self.get_logger().error(f'wrench_cmd stamped {format_ns(ns)} is not finite: its '
-                                    'non-finite components are read as 0',
-                                    throttle_duration_sec=THROTTLE)
+        check_finite(wrench, 'wrench')
         if self._needs_request():
             request = self._requests.get(ns)
             if request is None:
@@ -219,16 +226,10 @@ class ThrustAllocatorNode(TiltrovNode):
         else:
             self._allocate(ns, wrench, None)
 
-    @guarded
+    @input_callback(TILT_REQUEST)
     def _on_tilt_request(self, msg: JointState) -> None:
-        ns = stamp_ns(msg.header.stamp)
-        values = joint_values(msg, TILTS, 'position')
-        if values is None:
-            self.rejected_messages += 1
-            self.get_logger().error(f'ignoring a tilt_request stamped {format_ns(ns)}: needs '
-                                    'finite positions for tilt_front and tilt_rear',
-                                    throttle_duration_sec=THROTTLE)
-            return
+        ns = self.check_header(msg.header, None)
+        values = joint_state_values(msg, TILTS, 'position')
         request = (values[0], values[1])
         self._requests[ns] = request
         self._latest_request = request
@@ -283,12 +284,46 @@ class ThrustAllocatorNode(TiltrovNode):
 
     def _answer(self, ns: int, thrusts: Sequence[float], tilts: Sequence[float],
                 achieved: Sequence[float]) -> None:
-        msgs = (fill_wrench(new_wrench(), ns, achieved),
-                fill_joint_state(new_joint_state(TILTS), ns, position=tilts),
-                fill_joint_state(new_joint_state(THRUSTERS), ns, effort=thrusts))
+        """Publish an answer stamped ``ns``; one beyond the thrust limit or tilt range
+        (or not finite) is replaced by the safe answer, whatever the core returned."""
+        r = self.robot
+        limited = limit_command(thrusts, tilts, r.max_thrust, r.tilt_min, r.tilt_max)
+        if limited is not None:
+            msgs = (fill_wrench(new_wrench(), ns, achieved),
+                    fill_joint_state(new_joint_state(TILTS), ns, position=limited[1]),
+                    fill_joint_state(new_joint_state(THRUSTERS), ns, effort=limited[0]))
+        else:
+            self.out_of_limits += 1
+            self.get_logger().error(
+                f'allocation stamped {format_ns(ns)} is beyond the limits (thrusts '
+                f'{list(thrusts)}, tilts {list(tilts)}): publishing zero thrust',
+                throttle_duration_sec=THROTTLE)
+            msgs = self._safe_msgs(ns)
         self._last_ns = ns
         self._last_msgs = msgs
         self._publish(*msgs)
+
+    def held_tilts(self) -> tuple[float, float]:
+        """The tilts of the last allocation (in range), else 0: what a safe answer holds."""
+        prev = self.previous
+        if prev is None or not (math.isfinite(prev.tilt_front)
+                                and math.isfinite(prev.tilt_rear)):
+            return (0.0, 0.0)
+        lo, hi = self.robot.tilt_min, self.robot.tilt_max
+        return (min(max(prev.tilt_front, lo), hi), min(max(prev.tilt_rear, lo), hi))
+
+    def _safe_msgs(self, ns: int) -> tuple[WrenchStamped, JointState, JointState]:
+        """The safe answer stamped ``ns``: zero thrust (so zero wrench), tilts held."""
+        return (fill_wrench(new_wrench(), ns, (0.0,) * 6),
+                fill_joint_state(new_joint_state(TILTS), ns, position=self.held_tilts()),
+                fill_joint_state(new_joint_state(THRUSTERS), ns, effort=(0.0,) * 4))
+
+    def _answer_safe(self, ns: int) -> None:
+        self.safe_answers += 1
+        self._waiting = None
+        self._last_ns = ns
+        self._last_msgs = self._safe_msgs(ns)
+        self._publish(*self._last_msgs)
 
     def _publish(self, achieved: WrenchStamped, tilt: JointState, thrust: JointState) -> None:
         self._achieved_pub.publish(achieved)
@@ -311,9 +346,13 @@ class ThrustAllocatorNode(TiltrovNode):
         ns = waiting.ns if waiting is not None else None
         if ns is None or ns == self._last_ns:
             return
-        prev = self.previous
-        tilts = (prev.tilt_front, prev.tilt_rear) if prev is not None else (0.0, 0.0)
-        self._answer(ns, (0.0,) * 4, tilts, (0.0,) * 6)
+        self._answer_safe(ns)
+
+    def on_rejected(self, topic: str, bad: InvalidInput, stamp: int | None) -> None:
+        """A rejected wrench with a valid stamp gets the safe answer (the plant waits
+        for that stamp in lockstep); a bad stamp gets none."""
+        if topic == WRENCH_CMD and stamp is not None and stamp != self._last_ns:
+            self._answer_safe(stamp)
 
     # -- diagnostics -----------------------------------------------------------------
 
@@ -321,7 +360,7 @@ class ThrustAllocatorNode(TiltrovNode):
         level = OK
         message = (f'{self.allocator_config.mode}: {self.feasible} feasible, '
                    f'{self.infeasible} infeasible, {self.saturated} saturated')
-        if self.infeasible or self.stale_requests or self.rejected_messages:
+        if self.infeasible or self.stale_requests:
             level = WARN
         last = self.previous
         return level, message, {
@@ -330,8 +369,8 @@ class ThrustAllocatorNode(TiltrovNode):
             'saturated': self.saturated, 'max_weighted_error': self.max_error,
             'methods': dict(self.methods), 'republished': self.republished,
             'stale_tilt_requests': self.stale_requests,
-            'dropped_wrenches': self.dropped,
-            'rejected_messages': self.rejected_messages, 'resets': self.resets,
+            'dropped_wrenches': self.dropped, 'safe_answers': self.safe_answers,
+            'out_of_limits': self.out_of_limits, 'resets': self.resets,
             'last_feasible': last.feasible if last is not None else True,
             'tilt_request': self.tilt_request_mode,
         }
