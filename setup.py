@@ -18,6 +18,10 @@ package_name = 'tiltrov_ros'
 console_scripts = [
     'tiltrov = tiltrov_ros.cli:main',
     'bag_recorder = tiltrov_ros.nodes.bag_recorder:main',
+    'plant_simulator = tiltrov_ros.nodes.plant_simulator:main',
+    'wrench_controller = tiltrov_ros.nodes.wrench_controller:main',
+    'thrust_allocator = tiltrov_ros.nodes.thrust_allocator:main',
+    'reference_publisher = tiltrov_ros.nodes.reference_publisher:main',
 ]
 
 setup(

@@ -31,6 +31,8 @@ COMMANDS: dict[str, Command] = {
                                 'figures'),
     'report': Command('.report', "run the paper's scenarios with every controller; results "
                                  'table and figures into README.md'),
+    'launch': Command('.launcher', 'start the ROS stack (plant, controller, allocator, '
+                                   'reference) for a scenario, lockstep or realtime'),
 }
 
 

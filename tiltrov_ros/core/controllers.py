@@ -400,3 +400,24 @@ class SwitchingController:
         tau = err.J.T @ (self._kp * err.e + self._kd * err.e_dot)
         mask = _HORIZONTAL if self.mode == 'horizontal' else _VERTICAL
         return ControlOutput(tau * mask, self.tilts, str(self.mode))
+
+
+def retune(controller: Controller, config: ControllerConfig, robot: RobotParams) -> Controller:
+    """A controller with ``config``'s gains that carries on from ``controller``'s state.
+
+    For run-time gain changes (the ``wrench_controller`` node's parameters):
+    the PID keeps its integral (clamped to the new limit) and the time of its
+    last update; the switching baseline keeps its mode, its tilts and its
+    switch and transition times. A different ``config.kind`` starts afresh.
+    """
+    new = make_controller(config, robot)
+    if isinstance(controller, PIDController) and isinstance(new, PIDController):
+        new.integral = np.clip(controller.integral, -new._max_integral, new._max_integral)
+        new._last_t = controller._last_t
+    elif isinstance(controller, SwitchingController) and isinstance(new, SwitchingController):
+        new.mode = controller.mode
+        new.tilts = controller.tilts
+        new._switched_at = controller._switched_at
+        new._moving_until = controller._moving_until
+        new.switches = controller.switches
+    return new

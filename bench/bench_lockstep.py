@@ -1,0 +1,177 @@
+"""Benchmark of the ROS stack (not a test): lockstep speed and realtime latency.
+
+Measured in one run, so the ratios hold on any machine:
+
+* the real-time factor of ``run_scenario`` (the headless runner, what
+  ``tiltrov sim`` runs) on the scenario, the baseline;
+* the real-time factor of the same scenario through ``tiltrov launch`` in
+  lockstep, every node its own process and, with ``--single-process``, all in
+  one (per executor asked for). It is the plant's own figure: sim time over
+  the wall time from its initial state to the end (process start-up and
+  discovery excluded; the total wall time of the launch is reported too);
+* the odom -> thrust_cmd latency in realtime mode, separate processes: for
+  each control tick, the time between a probe receiving the ``odom`` stamped
+  t_i and the ``thrust_cmd`` stamped t_i (both DDS reception times in the
+  probe's process), median and 99th percentile.
+
+Aims (issue 6): RTF >= 10 with separate processes, >= 20 in a single process;
+latency < 2 ms at the 99th percentile.
+
+Run ``python bench/bench_lockstep.py`` (about a minute); ``main()`` returns the
+numbers as a dict and prints a table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from typing import Any
+
+import numpy as np
+
+from tiltrov_ros.core.runner import run_scenario, stack_config
+
+_END = re.compile(r'reached the end of the run at ([0-9.]+) s: ([0-9.]+) s wall since the '
+                  r'initial state, real-time factor ([0-9.]+)')
+
+
+def headless(scenario: str, duration: float | None) -> dict[str, float]:
+    config = stack_config(scenario)
+    sim = config.scenario.duration if duration is None else duration
+    start = time.perf_counter()
+    run_scenario(config, duration=sim)
+    wall = time.perf_counter() - start
+    return {'sim': sim, 'wall': wall, 'rtf': sim / wall}
+
+
+def _launch_argv(*args: str) -> list[str]:
+    return [sys.executable, '-m', 'tiltrov_ros.cli', 'launch', *args]
+
+
+def lockstep(scenario: str, duration: float | None, *, single_process: bool,
+             executor: str) -> dict[str, float]:
+    """One ``tiltrov launch`` in lockstep; the plant's real-time factor."""
+    args = ['--scenario', scenario, '--executor', executor]
+    if duration is not None:
+        args += ['--duration', repr(float(duration))]
+    if single_process:
+        args.append('--single-process')
+    start = time.perf_counter()
+    result = subprocess.run(_launch_argv(*args), capture_output=True, text=True,
+                            timeout=3600, cwd=tempfile.gettempdir())
+    total = time.perf_counter() - start
+    output = result.stdout + result.stderr
+    match = _END.search(output)
+    if result.returncode != 0 or match is None:
+        raise RuntimeError(f'tiltrov launch {" ".join(args)} failed:\n{output[-3000:]}')
+    sim, wall, rtf = (float(g) for g in match.groups())
+    return {'sim': sim, 'wall': wall, 'rtf': rtf, 'total_wall': total}
+
+
+def latency(seconds_of_sim: float, real_time_factor: float) -> dict[str, float]:
+    """odom -> thrust_cmd latency (ms) in realtime mode, separate processes."""
+    from nav_msgs.msg import Odometry
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import JointState
+
+    from tiltrov_ros.nodes.common import ODOM, THRUST_CMD, stamp_ns
+
+    context = Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node('latency_probe', context=context)
+    qos = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_ALL)
+    received: dict[str, dict[int, int]] = {'odom': {}, 'thrust': {}}
+
+    def keep(kind: str):
+        def callback(msg: Any, info: Any) -> None:
+            received[kind].setdefault(stamp_ns(msg.header.stamp),
+                                      int(info['received_timestamp']))
+        return callback
+
+    node.create_subscription(Odometry, ODOM, keep('odom'), qos)
+    node.create_subscription(JointState, THRUST_CMD, keep('thrust'), qos)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    spinning = threading.Thread(target=executor.spin, daemon=True)
+    spinning.start()
+    try:
+        result = subprocess.run(
+            # The plant starts the clock once the controller and this probe read odom.
+            _launch_argv('--scenario', 'pitch_hold', '--realtime', '--real-time-factor',
+                         repr(float(real_time_factor)), '--duration', repr(seconds_of_sim),
+                         '--param', 'plant_simulator:startup_subscribers:=2'),
+            capture_output=True, text=True, timeout=600, cwd=tempfile.gettempdir())
+        if result.returncode != 0:
+            raise RuntimeError(f'realtime launch failed:\n{result.stdout[-3000:]}')
+        time.sleep(0.2)
+    finally:
+        executor.shutdown()
+        spinning.join(timeout=5.0)
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+    odom, thrust = received['odom'], received['thrust']
+    samples = np.array([(thrust[t] - odom[t]) / 1e6 for t in thrust if t in odom])
+    if samples.size == 0:
+        raise RuntimeError(f'no odom/thrust_cmd pair was received ({len(odom)} odom, '
+                           f'{len(thrust)} thrust_cmd)')
+    return {'samples': float(samples.size), 'median_ms': float(np.median(samples)),
+            'p99_ms': float(np.percentile(samples, 99)), 'max_ms': float(samples.max())}
+
+
+def main(argv: list[str] | None = None) -> dict[str, float]:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--scenario', default='trajectory')
+    parser.add_argument('--duration', type=float, default=None,
+                        help="sim seconds (default: the scenario's, 120 s for trajectory)")
+    parser.add_argument('--executors', default='events',
+                        help='comma-separated executors for the single-process runs '
+                             '(events, single, multi; default: events)')
+    parser.add_argument('--latency-duration', type=float, default=20.0,
+                        help='sim seconds of the realtime latency run (default 20)')
+    parser.add_argument('--latency-rtf', type=float, default=1.0)
+    parser.add_argument('--skip-latency', action='store_true')
+    args = parser.parse_args(argv)
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+
+    out: dict[str, float] = {}
+    rows: list[tuple[str, str, str, str]] = []
+    base = headless(args.scenario, args.duration)
+    out.update(headless_wall=base['wall'], headless_rtf=base['rtf'])
+    rows.append(('run_scenario (headless)', f"{base['wall']:.2f}", f"{base['rtf']:.1f}", '1.00'))
+    runs = [('separate processes', False, 'events')]
+    runs += [(f'--single-process ({kind})', True, kind)
+             for kind in args.executors.split(',') if kind]
+    for label, single, kind in runs:
+        r = lockstep(args.scenario, args.duration, single_process=single, executor=kind)
+        key = 'single_process' if single else 'separate'
+        if single and kind != 'events':
+            key += f'_{kind}'
+        out.update({f'{key}_wall': r['wall'], f'{key}_rtf': r['rtf'],
+                    f'{key}_total_wall': r['total_wall']})
+        rows.append((f'lockstep, {label}', f"{r['wall']:.2f} ({r['total_wall']:.2f})",
+                     f"{r['rtf']:.1f}", f"{r['rtf'] / base['rtf']:.2f}"))
+    sim = base['sim']
+    print(f'{args.scenario}: {sim:g} s of sim time')
+    print(f"{'run':<42} {'wall s (launch)':>16} {'RTF':>7} {'/headless':>10}")
+    for row in rows:
+        print(f'{row[0]:<42} {row[1]:>16} {row[2]:>7} {row[3]:>10}')
+    if not args.skip_latency:
+        lat = latency(args.latency_duration, args.latency_rtf)
+        out.update({f'latency_{k}': v for k, v in lat.items()})
+        print(f"odom -> thrust_cmd, realtime x{args.latency_rtf:g}, separate processes: "
+              f"median {lat['median_ms']:.2f} ms, p99 {lat['p99_ms']:.2f} ms, "
+              f"max {lat['max_ms']:.2f} ms ({lat['samples']:.0f} ticks)")
+    return out
+
+
+if __name__ == '__main__':
+    main()

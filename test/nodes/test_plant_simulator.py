@@ -1,0 +1,235 @@
+"""plant_simulator: topics, types, frames, stamps, lockstep waiting, stalls, parameters."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rclpy.exceptions import InvalidParameterTypeException, ParameterException
+from rclpy.parameter import Parameter
+from ros_stack import KEEP_ALL, MS, Probe, joint_state
+from sensor_msgs.msg import JointState
+
+from tiltrov_ros.core.errors import ParameterError
+from tiltrov_ros.core.runner import stack_config
+from tiltrov_ros.nodes import plant_simulator
+from tiltrov_ros.nodes.plant_simulator import PlantSimulator
+from tiltrov_ros.paths import config_file
+
+THRUSTERS = ['thruster_1', 'thruster_2', 'thruster_3', 'thruster_4']
+TILTS = ['tilt_front', 'tilt_rear']
+STEP = 10 * MS
+
+
+@pytest.fixture
+def rig(ros):
+    """A command publisher and a probe of the plant's outputs."""
+    node = ros.node('plant_test')
+    probe = Probe(node, ['odom', 'joint_states', '/clock', '/diagnostics'])
+    thrust = node.create_publisher(JointState, 'thrust_cmd', KEEP_ALL)
+    tilt = node.create_publisher(JointState, 'tilt_cmd', KEEP_ALL)
+
+    def command(ns: int, thrusts, tilts) -> None:
+        tilt.publish(joint_state(ns, TILTS, position=tilts))
+        thrust.publish(joint_state(ns, THRUSTERS, effort=thrusts))
+
+    return ros, probe, command, thrust
+
+
+def _plant(ros, **overrides) -> PlantSimulator:
+    return ros.add(PlantSimulator(context=ros.context, parameter_overrides=overrides))
+
+
+def test_lockstep_initial_state_then_one_control_period_per_command(rig) -> None:
+    ros, probe, command, _ = rig
+    node = _plant(ros, mode='lockstep', scenario='pitch_hold')
+    assert ros.spin_until(lambda: probe.stamps('odom') == [0])
+    assert ros.spin_until(lambda: probe.stamps('/clock') == [0])
+
+    first = probe['odom'][0]
+    assert (first.header.frame_id, first.child_frame_id) == ('odom_ned', 'base_link_frd')
+    o = first.pose.pose.orientation
+    assert (o.x, o.y, o.z, o.w) == (0.0, 0.0, 0.0, 1.0)
+    joints = probe['joint_states'][0]
+    assert list(joints.name) == TILTS + THRUSTERS
+    assert list(joints.position[:2]) == [0.0, 0.0] and list(joints.effort[2:]) == [0.0] * 4
+    assert all(math.isnan(v) for v in (*joints.position[2:], *joints.velocity[2:],
+                                       *joints.effort[:2]))
+
+    # No command, no step.
+    ros.spin_for(0.2)
+    assert probe.stamps('odom') == [0]
+
+    thrusts, tilts = [10.0, -5.0, 3.0, 0.5], [0.2, -0.1]
+    command(0, thrusts, tilts)
+    assert ros.spin_until(lambda: probe.stamps('odom')[-1:] == [5 * STEP])
+    ros.spin_for(0.2)   # ... and it waits at the next tick, 50 ms
+    assert probe.stamps('odom') == [i * STEP for i in range(6)]
+    assert probe.stamps('/clock') == [i * STEP for i in range(6)]
+    assert probe.stamps('joint_states') == [i * STEP for i in range(6)]
+
+    # The same as the core plant given the same commands (zero-order hold).
+    reference = stack_config('pitch_hold').build_plant()
+    reference.command(thrusts, tilts)
+    for msg in probe['odom'][1:]:
+        reference.step()
+        p, q = msg.pose.pose.position, msg.pose.pose.orientation
+        assert [p.x, p.y, p.z] == list(reference.position)
+        assert [q.w, q.x, q.y, q.z] == list(reference.quaternion)
+        t = msg.twist.twist
+        assert [t.linear.x, t.linear.y, t.linear.z, t.angular.x, t.angular.y,
+                t.angular.z] == list(reference.nu)
+    last = probe['joint_states'][-1]
+    assert list(last.position[:2]) == list(reference.tilts)
+    assert list(last.velocity[:2]) == list(reference.tilt_velocities)
+    assert list(last.effort[2:]) == list(reference.thrusts)
+
+    # A late copy of the tick's commands changes nothing.
+    command(0, [40.0] * 4, [1.0, 1.0])
+    ros.spin_for(0.2)
+    assert node.plant.time_ns == 5 * STEP
+    assert probe.stamps('odom')[-1] == 5 * STEP
+
+
+def test_lockstep_rejected_command_holds_the_previous_and_advances(rig) -> None:
+    ros, probe, command, _thrust = rig
+    node = _plant(ros, mode='lockstep')
+    assert ros.spin_until(lambda: probe.stamps('odom') == [0])
+    command(0, [5.0, 5.0, 5.0, 5.0], [0.0, 0.0])
+    assert ros.spin_until(lambda: node.plant.time_ns == 5 * STEP)
+    # thruster_4 missing: rejected; the tick still counts as answered, the command holds.
+    command(5 * STEP, [1.0, 2.0, 3.0], [0.1, 0.1])
+    assert ros.spin_until(lambda: node.plant.time_ns == 10 * STEP)
+    assert node.rejected_messages == 1
+    assert node.plant.thrusters.command_held == (5.0, 5.0, 5.0, 5.0)
+    # A non-finite value is rejected the same way.
+    command(10 * STEP, [1.0, math.nan, 0.0, 0.0], [0.0, 0.0])
+    assert ros.spin_until(lambda: node.plant.time_ns == 15 * STEP)
+    assert node.rejected_messages == 2
+    assert node.plant.thrusters.command_held == (5.0, 5.0, 5.0, 5.0)
+    assert ros.spin_until(lambda: probe.stamps('odom') == [i * STEP for i in range(16)])
+
+
+def test_lockstep_stall_republishes_the_tick_and_is_reported(rig) -> None:
+    ros, probe, command, _ = rig
+    node = _plant(ros, mode='lockstep', stall_timeout=0.05)
+    assert ros.spin_until(lambda: probe.stamps('odom') == [0])
+    command(0, [0.0] * 4, [0.0, 0.0])
+    assert ros.spin_until(lambda: node.plant.time_ns == 5 * STEP)
+    # Nobody answers the tick at 50 ms: its state comes again, and /diagnostics says so.
+    assert ros.spin_until(lambda: probe.stamps('odom').count(5 * STEP) >= 3
+                          and probe.stamps('/clock').count(5 * STEP) >= 3, timeout=10.0)
+    assert node.stalls >= 2
+
+    def warned() -> bool:
+        return any(s.name.endswith('plant_simulator') and s.level == b'\x01'
+                   and 'stalled' in s.message
+                   for msg in probe['/diagnostics'] for s in msg.status)
+
+    assert ros.spin_until(warned, timeout=5.0)
+    status = next(s for msg in probe['/diagnostics'] for s in msg.status
+                  if s.name.endswith('plant_simulator') and s.level == b'\x01')
+    values = {kv.key: kv.value for kv in status.values}
+    assert int(values['stalls']) >= 1 and values['mode'] == 'lockstep'
+    # The answer resumes the run.
+    command(5 * STEP, [0.0] * 4, [0.0, 0.0])
+    assert ros.spin_until(lambda: node.plant.time_ns == 10 * STEP)
+
+
+def test_lockstep_waits_for_its_peers_before_the_initial_state(ros) -> None:
+    probe = Probe(ros.node('plant_probe'), ['odom'])
+    _plant(ros, mode='lockstep')
+    ros.spin_for(0.3)
+    assert probe['odom'] == []          # no command publisher yet
+    publisher = ros.node('late_allocator')
+    publisher.create_publisher(JointState, 'thrust_cmd', KEEP_ALL)
+    publisher.create_publisher(JointState, 'tilt_cmd', KEEP_ALL)
+    assert ros.spin_until(lambda: probe.stamps('odom') == [0])
+
+
+def test_realtime_runs_to_the_end_with_the_latest_command(rig) -> None:
+    ros, probe, command, _ = rig
+    node = _plant(ros, mode='realtime', real_time_factor=50.0, duration=0.5)
+    command(0, [20.0] * 4, [0.3, 0.3])
+    assert ros.spin_until(node.finished.done, timeout=20.0)
+    assert ros.spin_until(lambda: probe.stamps('odom')[-1:] == [50 * STEP])
+    assert sorted(set(probe.stamps('odom'))) == [i * STEP for i in range(51)]
+    assert node.finished.result() == 50 * STEP
+    last = probe['joint_states'][-1]
+    assert last.effort[2] > 10.0 and last.position[0] > 0.2   # the command was applied
+    ros.spin_for(0.1)
+    assert probe.stamps('odom')[-1] == 50 * STEP               # and it stopped there
+
+
+def test_parameters_scenario_overrides_and_defaults(ros) -> None:
+    default = _plant(ros)
+    assert default.config.mode == 'realtime' and default.config.step_ns == STEP
+    assert default.config.disturbances.com_error == (0.0, 0.0, 0.0)
+
+    slow = ros.add(PlantSimulator(node_name='slow', context=ros.context, parameter_overrides={
+        'scenario': 'pitch_hold_slow_servo', 'com_error': [0.0, 0.0, 0.0],
+        'current': [0.1, -0.2, 0.0], 'mode': 'lockstep'}))
+    assert slow.config.robot.tilt_rate_limit == pytest.approx(math.radians(60.0))
+    assert slow.config.disturbances.com_error == (0.0, 0.0, 0.0)    # explicit zero wins
+    assert slow.config.disturbances.current == (0.1, -0.2, 0.0)
+    scenario = ros.add(PlantSimulator(node_name='scn', context=ros.context,
+                                      parameter_overrides={'scenario': 'pitch_hold',
+                                                           'mode': 'lockstep'}))
+    assert scenario.config.disturbances.com_error == (0.01, 0.0, 0.005)
+
+    # Run-time: real_time_factor is checked against its range; geometry is read-only.
+    result = default.set_parameters([Parameter('real_time_factor', value=-1.0)])[0]
+    assert not result.successful and 'real_time_factor' in result.reason
+    assert default.set_parameters([Parameter('real_time_factor', value=5.0)])[0].successful
+    assert default.config.real_time_factor == 5.0
+    result = default.set_parameters([Parameter('robot.length', value=1.0)])[0]
+    assert not result.successful and 'read-only' in result.reason
+
+
+@pytest.mark.parametrize(('overrides', 'name'), [
+    ({'mode': 'fast'}, 'mode'),
+    ({'duration': 0.015}, 'duration'),
+    ({'control_period': 0.055}, 'control_period'),
+    ({'com_error': [0.1, 0.0]}, 'com_error'),
+    ({'robot.length': -0.6}, 'robot.length'),
+])
+def test_invalid_parameters_name_themselves(ros, overrides, name) -> None:
+    with pytest.raises((ParameterError, ParameterException)) as info:
+        PlantSimulator(context=ros.context, parameter_overrides=overrides)
+    assert name in str(info.value)
+
+
+def test_shipped_yaml_and_a_wrong_type_yaml(ros, tmp_path: Path) -> None:
+    files = ['--ros-args', '--params-file', str(config_file('robot.yaml')),
+             '--params-file', str(config_file('plant_simulator.yaml'))]
+    node = ros.add(PlantSimulator(context=ros.context, cli_args=files))
+    assert node.config.step_ns == STEP and node.config.mode == 'realtime'
+    assert node.get_parameter('robot.max_thrust').value == 40.0
+
+    bad = tmp_path / 'plant_simulator.yaml'
+    bad.write_text('plant_simulator:\n  ros__parameters:\n    step_size: 1\n')
+    with pytest.raises(InvalidParameterTypeException, match='step_size'):
+        PlantSimulator(context=ros.context, cli_args=['--ros-args', '--params-file', str(bad)])
+
+
+def test_main_reports_a_bad_parameter_and_exits_1(capsys: pytest.CaptureFixture[str]) -> None:
+    code = plant_simulator.main(['plant_simulator', '--ros-args', '-p', 'mode:=fast'])
+    assert code == 1
+    err = capsys.readouterr().err
+    assert 'plant_simulator' in err and "'mode'" in err and 'lockstep' in err
+
+
+def test_joint_states_values_are_the_plant_sample(rig) -> None:
+    ros, probe, command, _ = rig
+    node = _plant(ros, mode='lockstep')
+    assert ros.spin_until(lambda: probe.stamps('odom') == [0])
+    command(0, [40.0, -40.0, 12.0, 0.0], [1.2, -0.7])
+    assert ros.spin_until(lambda: node.plant.time_ns == 5 * STEP)
+    assert ros.spin_until(lambda: len(probe['joint_states']) == 6)
+    sample = node.plant.sample()
+    msg = probe['joint_states'][-1]
+    np.testing.assert_array_equal(msg.position[:2], sample.tilts)
+    np.testing.assert_array_equal(msg.velocity[:2], sample.tilt_velocities)
+    np.testing.assert_array_equal(msg.effort[2:], sample.thrusts)

@@ -1,0 +1,228 @@
+"""wrench_controller: ticks, stamps, waiting for the setpoint, idempotence, parameters."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+from geometry_msgs.msg import PoseStamped, TwistStamped
+from nav_msgs.msg import Odometry
+import numpy as np
+import pytest
+from rclpy.exceptions import InvalidParameterTypeException
+from rclpy.parameter import Parameter
+from ros_stack import KEEP_ALL, MS, Probe, odometry, pose, twist, wrench_rows
+
+from tiltrov_ros.core.controllers import Reference, load_controller_config, make_controller
+from tiltrov_ros.core.kinematics import quat_from_euler
+from tiltrov_ros.core.params import load_robot_params
+from tiltrov_ros.nodes.wrench_controller import WrenchController
+from tiltrov_ros.paths import config_file
+
+TICK = 50 * MS
+POSITION = [0.1, -0.05, 0.2]
+QUATERNION = list(quat_from_euler(0.02, -0.1, 0.3))
+NU = [0.1, 0.0, -0.05, 0.01, 0.02, -0.03]
+SETPOINT = ([0.0, 0.0, 0.1], list(quat_from_euler(0.0, -0.2, 0.0)))
+VELOCITY = [0.01, 0.0, -0.02, 0.0, -0.01, 0.0]
+
+
+@pytest.fixture
+def rig(ros):
+    node = ros.node('controller_test')
+    probe = Probe(node, ['wrench_cmd', 'tilt_request', '/diagnostics'])
+    pubs = {'odom': node.create_publisher(Odometry, 'odom', KEEP_ALL),
+            'setpoint': node.create_publisher(PoseStamped, 'setpoint', KEEP_ALL),
+            'velocity': node.create_publisher(TwistStamped, 'setpoint_velocity', KEEP_ALL)}
+
+    def send(what: str, ns: int) -> None:
+        if what == 'odom':
+            pubs['odom'].publish(odometry(ns, POSITION, QUATERNION, NU))
+        elif what == 'setpoint':
+            pubs['setpoint'].publish(pose(ns, *SETPOINT))
+        else:
+            pubs['velocity'].publish(twist(ns, VELOCITY))
+
+    def ready() -> bool:
+        return all(p.get_subscription_count() > 0 for p in pubs.values())
+
+    return ros, probe, send, ready
+
+
+def _controller(ros, **overrides) -> WrenchController:
+    return ros.add(WrenchController(context=ros.context, parameter_overrides=overrides))
+
+
+def _expected(kind: str, t: float = 0.0, velocity=VELOCITY):
+    controller = make_controller(load_controller_config().with_kind(kind), load_robot_params())
+    reference = Reference(np.array(SETPOINT[0]), np.array(SETPOINT[1]), np.array(velocity))
+    return controller, controller.update(t, np.array(POSITION), np.array(QUATERNION),
+                                         np.array(NU), reference)
+
+
+def test_lockstep_tick_waits_for_its_setpoint_and_answers_with_the_odom_stamp(rig) -> None:
+    ros, probe, send, ready = rig
+    node = _controller(ros, mode='lockstep')
+    assert ros.spin_until(ready)
+    send('odom', 10 * MS)            # not a control tick: ignored
+    send('odom', 0)                  # a tick, but no setpoint yet
+    ros.spin_for(0.2)
+    assert probe['wrench_cmd'] == []
+    send('velocity', 0)
+    send('setpoint', TICK)           # another tick's setpoint does not do
+    ros.spin_for(0.1)
+    assert probe['wrench_cmd'] == []
+    send('setpoint', 0)
+    assert ros.spin_until(lambda: len(probe['wrench_cmd']) == 1)
+    msg = probe['wrench_cmd'][0]
+    assert probe.stamps('wrench_cmd') == [0]
+    assert msg.header.frame_id == 'base_link_frd'
+    _, expected = _expected('pd')
+    np.testing.assert_array_equal(wrench_rows([msg])[0], expected.wrench)
+    assert probe['tilt_request'] == [] and node.ticks == 1
+
+
+def test_repeated_odom_stamp_republishes_without_advancing_the_state(rig) -> None:
+    ros, probe, send, ready = rig
+    node = _controller(ros, mode='lockstep', controller='pid')
+    assert ros.spin_until(ready)
+    for what in ('odom', 'velocity', 'setpoint'):
+        send(what, 0)
+    assert ros.spin_until(lambda: len(probe['wrench_cmd']) == 1)
+    for what in ('velocity', 'setpoint', 'odom'):
+        send(what, TICK)
+    assert ros.spin_until(lambda: len(probe['wrench_cmd']) == 2)
+    integral = node.controller.integral.copy()
+    send('odom', TICK)               # the plant re-publishes a stalled tick
+    assert ros.spin_until(lambda: len(probe['wrench_cmd']) == 3)
+    assert probe.stamps('wrench_cmd') == [0, TICK, TICK]
+    np.testing.assert_array_equal(wrench_rows(probe['wrench_cmd'][1:2]),
+                                  wrench_rows(probe['wrench_cmd'][2:3]))
+    np.testing.assert_array_equal(node.controller.integral, integral)
+    assert (node.ticks, node.republished) == (2, 1)
+    # Both ticks as the core PID gives them.
+    controller, first = _expected('pid')
+    np.testing.assert_array_equal(wrench_rows(probe['wrench_cmd'][:1])[0], first.wrench)
+    second = controller.update(0.05, np.array(POSITION), np.array(QUATERNION), np.array(NU),
+                               Reference(np.array(SETPOINT[0]), np.array(SETPOINT[1]),
+                                         np.array(VELOCITY)))
+    np.testing.assert_array_equal(wrench_rows(probe['wrench_cmd'][1:2])[0], second.wrench)
+
+
+def test_switching_publishes_its_tilt_request_with_the_same_stamp(rig) -> None:
+    ros, probe, send, ready = rig
+    _controller(ros, mode='lockstep', controller='switching')
+    assert ros.spin_until(ready)
+    for what in ('velocity', 'setpoint', 'odom'):
+        send(what, 0)
+    assert ros.spin_until(lambda: probe['wrench_cmd'] and probe['tilt_request'])
+    request = probe['tilt_request'][0]
+    assert probe.stamps('tilt_request') == probe.stamps('wrench_cmd') == [0]
+    assert list(request.name) == ['tilt_front', 'tilt_rear']
+    _, expected = _expected('switching')
+    assert tuple(request.position) == expected.tilt_request
+    np.testing.assert_array_equal(wrench_rows(probe['wrench_cmd'])[0], expected.wrench)
+
+
+def test_missing_setpoint_velocity_reads_as_zero_after_the_timeout(rig) -> None:
+    ros, probe, send, ready = rig
+    node = _controller(ros, mode='lockstep', input_timeout=0.05)
+    assert ros.spin_until(ready)
+    send('odom', 0)
+    send('setpoint', 0)
+    assert ros.spin_until(lambda: len(probe['wrench_cmd']) == 1)
+    _, expected = _expected('pd', velocity=[0.0] * 6)
+    np.testing.assert_array_equal(wrench_rows(probe['wrench_cmd'])[0], expected.wrench)
+    assert node.velocity_timeouts == 1
+
+
+def test_realtime_uses_the_latest_setpoint_and_zero_wrench_without_one(rig) -> None:
+    ros, probe, send, ready = rig
+    node = _controller(ros, mode='realtime')
+    assert ros.spin_until(ready)
+    send('odom', 0)
+    assert ros.spin_until(lambda: len(probe['wrench_cmd']) == 1)
+    assert list(wrench_rows(probe['wrench_cmd'])[0]) == [0.0] * 6
+    assert node.no_setpoint == 1
+    send('velocity', 0)
+    send('setpoint', 0)
+    ros.spin_for(0.1)
+    send('odom', 3 * TICK)           # the latest setpoint (stamped 0) is used
+    assert ros.spin_until(lambda: len(probe['wrench_cmd']) == 2)
+    _, expected = _expected('pd', t=0.15)
+    np.testing.assert_array_equal(wrench_rows(probe['wrench_cmd'])[1], expected.wrench)
+    assert probe.stamps('wrench_cmd') == [0, 3 * TICK]
+
+
+def test_setpoint_in_another_frame_is_rejected(rig) -> None:
+    ros, _probe, _send, ready = rig
+    node = _controller(ros, mode='realtime')
+    assert ros.spin_until(ready)
+    publisher = ros.nodes[0].create_publisher(PoseStamped, 'setpoint', KEEP_ALL)
+    assert ros.spin_until(lambda: publisher.get_subscription_count() > 0)
+    publisher.publish(pose(0, *SETPOINT, frame_id='odom'))
+    assert ros.spin_until(lambda: node.rejected_messages == 1)
+
+
+def test_run_time_gain_changes_are_validated_by_the_core(rig) -> None:
+    ros, probe, send, ready = rig
+    node = _controller(ros, mode='lockstep')
+    shipped = load_controller_config()
+    result = node.set_parameters([Parameter('gains.kp', value=[-1.0, 1.0, 1.0, 1.0, 1.0, 1.0])])
+    assert not result[0].successful
+    assert 'gains.kp' in result[0].reason and 'allowed' in result[0].reason
+    result = node.set_parameters([Parameter('gains.kd', value=[1.0, 2.0])])
+    assert not result[0].successful and 'gains.kd' in result[0].reason
+    result = node.set_parameters([Parameter('switching.angle_scale', value=0.0)])
+    assert not result[0].successful and 'switching.angle_scale' in result[0].reason
+    result = node.set_parameters([Parameter('controller', value='pid')])
+    assert not result[0].successful and 'read-only' in result[0].reason
+    assert node.controller.gains == shipped.gains      # nothing changed
+
+    doubled = [2.0 * k for k in shipped.gains.kp]
+    assert node.set_parameters([Parameter('gains.kp', value=doubled)])[0].successful
+    assert node.controller.gains.kp == tuple(doubled)
+    assert ros.spin_until(ready)
+    for what in ('velocity', 'setpoint', 'odom'):
+        send(what, 0)
+    assert ros.spin_until(lambda: len(probe['wrench_cmd']) == 1)
+    controller = make_controller(replace(shipped, gains=replace(shipped.gains,
+                                                                kp=tuple(doubled))),
+                                 load_robot_params())
+    expected = controller.update(0.0, np.array(POSITION), np.array(QUATERNION), np.array(NU),
+                                 Reference(np.array(SETPOINT[0]), np.array(SETPOINT[1]),
+                                           np.array(VELOCITY)))
+    np.testing.assert_array_equal(wrench_rows(probe['wrench_cmd'])[0], expected.wrench)
+
+
+def test_shipped_yaml_defaults_and_a_wrong_type_yaml(ros, tmp_path: Path) -> None:
+    files = ['--ros-args', '--params-file', str(config_file('robot.yaml')),
+             '--params-file', str(config_file('wrench_controller.yaml'))]
+    node = ros.add(WrenchController(context=ros.context, cli_args=files))
+    assert node.controller_config == load_controller_config()
+    assert node.kind == 'pd' and node.mode == 'realtime'
+    bare = ros.add(WrenchController(node_name='bare', context=ros.context))
+    assert bare.controller_config == load_controller_config()
+
+    bad = tmp_path / 'wrench_controller.yaml'
+    bad.write_text('wrench_controller:\n  ros__parameters:\n    switching:\n'
+                   '      dwell_time: 1\n')
+    with pytest.raises(InvalidParameterTypeException, match=r'switching\.dwell_time'):
+        WrenchController(context=ros.context, cli_args=['--ros-args', '--params-file', str(bad)])
+    with pytest.raises(Exception, match='controller'):
+        WrenchController(context=ros.context, parameter_overrides={'controller': 'lqr'})
+
+
+def test_diagnostics_report_the_ticks(rig) -> None:
+    ros, probe, send, ready = rig
+    _controller(ros, mode='lockstep')
+    assert ros.spin_until(ready)
+    for what in ('velocity', 'setpoint', 'odom'):
+        send(what, 0)
+
+    def reported() -> bool:
+        return any(s.name.endswith('wrench_controller')
+                   and {kv.key: kv.value for kv in s.values}.get('ticks') == '1'
+                   for m in probe['/diagnostics'] for s in m.status)
+
+    assert ros.spin_until(reported, timeout=5.0)

@@ -1,0 +1,201 @@
+"""Helpers of the node and stack tests: a topic probe, message builders, running the stack.
+
+Imported as ``ros_stack`` (test/ is on sys.path: it holds conftest.py).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+import time
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
+from nav_msgs.msg import Odometry
+import numpy as np
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+
+from tiltrov_ros import launcher
+from tiltrov_ros.nodes.common import stamp_ns
+
+NS = 1_000_000_000
+MS = 1_000_000
+
+#: Probe readers: reliable, keep everything (the stack's writers are reliable).
+KEEP_ALL = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.VOLATILE, history=HistoryPolicy.KEEP_ALL)
+
+TOPIC_TYPES: dict[str, Any] = {
+    'odom': Odometry, 'joint_states': JointState, '/clock': Clock,
+    'setpoint': PoseStamped, 'setpoint_velocity': TwistStamped,
+    'wrench_cmd': WrenchStamped, 'tilt_request': JointState,
+    'thrust_cmd': JointState, 'tilt_cmd': JointState, 'wrench_achieved': WrenchStamped,
+    '/diagnostics': DiagnosticArray,
+}
+
+
+class Probe:
+    """Subscribes to topics and keeps every message, in arrival order."""
+
+    def __init__(self, node: Any, topics: Sequence[str]) -> None:
+        self.node = node
+        self.messages: dict[str, list[Any]] = {topic: [] for topic in topics}
+        for topic in topics:
+            node.create_subscription(TOPIC_TYPES[topic], topic, self.messages[topic].append,
+                                     KEEP_ALL)
+
+    def __getitem__(self, topic: str) -> list[Any]:
+        return self.messages[topic]
+
+    def stamps(self, topic: str) -> list[int]:
+        if topic == '/clock':
+            return [stamp_ns(m.clock) for m in self.messages[topic]]
+        return [stamp_ns(m.header.stamp) for m in self.messages[topic]]
+
+    def by_stamp(self, topic: str) -> dict[int, Any]:
+        """Last message of each stamp."""
+        return dict(zip(self.stamps(topic), self.messages[topic]))
+
+    def clear(self) -> None:
+        for messages in self.messages.values():
+            messages.clear()
+
+
+def stamped(msg: Any, ns: int, frame_id: str = '') -> Any:
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(ns, NS)
+    msg.header.frame_id = frame_id
+    return msg
+
+
+def joint_state(ns: int, names: Sequence[str], **fields: Sequence[float]) -> JointState:
+    msg = stamped(JointState(), ns)
+    msg.name = list(names)
+    for key, values in fields.items():
+        setattr(msg, key, [float(v) for v in values])
+    return msg
+
+
+def odometry(ns: int, position: Sequence[float], quaternion_wxyz: Sequence[float],
+             nu: Sequence[float]) -> Odometry:
+    msg = stamped(Odometry(), ns, 'odom_ned')
+    msg.child_frame_id = 'base_link_frd'
+    p, o = msg.pose.pose.position, msg.pose.pose.orientation
+    p.x, p.y, p.z = (float(v) for v in position)
+    o.w, o.x, o.y, o.z = (float(v) for v in quaternion_wxyz)
+    t = msg.twist.twist
+    t.linear.x, t.linear.y, t.linear.z, t.angular.x, t.angular.y, t.angular.z = (
+        float(v) for v in nu)
+    return msg
+
+
+def pose(ns: int, position: Sequence[float], quaternion_wxyz: Sequence[float],
+         frame_id: str = 'odom_ned') -> PoseStamped:
+    msg = stamped(PoseStamped(), ns, frame_id)
+    p, o = msg.pose.position, msg.pose.orientation
+    p.x, p.y, p.z = (float(v) for v in position)
+    o.w, o.x, o.y, o.z = (float(v) for v in quaternion_wxyz)
+    return msg
+
+
+def twist(ns: int, velocity: Sequence[float]) -> TwistStamped:
+    msg = stamped(TwistStamped(), ns, 'odom_ned')
+    t = msg.twist
+    t.linear.x, t.linear.y, t.linear.z, t.angular.x, t.angular.y, t.angular.z = (
+        float(v) for v in velocity)
+    return msg
+
+
+def wrench(ns: int, values: Sequence[float]) -> WrenchStamped:
+    msg = stamped(WrenchStamped(), ns, 'base_link_frd')
+    f, t = msg.wrench.force, msg.wrench.torque
+    f.x, f.y, f.z, t.x, t.y, t.z = (float(v) for v in values)
+    return msg
+
+
+def odom_rows(messages: Sequence[Odometry]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(position, quaternion (w x y z), nu) arrays of odometry messages."""
+    p = np.array([[m.pose.pose.position.x, m.pose.pose.position.y, m.pose.pose.position.z]
+                  for m in messages])
+    q = np.array([[m.pose.pose.orientation.w, m.pose.pose.orientation.x,
+                   m.pose.pose.orientation.y, m.pose.pose.orientation.z] for m in messages])
+    nu = np.array([[m.twist.twist.linear.x, m.twist.twist.linear.y, m.twist.twist.linear.z,
+                    m.twist.twist.angular.x, m.twist.twist.angular.y, m.twist.twist.angular.z]
+                   for m in messages])
+    return p, q, nu
+
+
+def wrench_rows(messages: Sequence[WrenchStamped]) -> np.ndarray:
+    return np.array([[m.wrench.force.x, m.wrench.force.y, m.wrench.force.z,
+                      m.wrench.torque.x, m.wrench.torque.y, m.wrench.torque.z]
+                     for m in messages])
+
+
+def effort_rows(messages: Sequence[JointState]) -> np.ndarray:
+    return np.array([list(m.effort) for m in messages])
+
+
+def spin(executor: Any, predicate: Callable[[], bool], timeout: float) -> bool:
+    """Spin ``executor`` until ``predicate()`` or ``timeout`` wall seconds."""
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > deadline:
+            return bool(predicate())
+        executor.spin_once(timeout_sec=0.01)
+    return True
+
+
+@dataclass
+class StackRun:
+    """What a probe recorded during one in-process lockstep run."""
+
+    nodes: list[Any]
+    probe: Probe
+    specs: list[launcher.NodeSpec]
+    config: Any
+    duration: float
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def node(self, name: str) -> Any:
+        return next(n for n, s in zip(self.nodes, self.specs) if s.name == name)
+
+
+STACK_TOPICS = ('odom', 'joint_states', '/clock', 'setpoint', 'setpoint_velocity',
+                'wrench_cmd', 'tilt_request', 'thrust_cmd', 'tilt_cmd', 'wrench_achieved')
+
+
+def run_stack(context: Any, executor: Any, options: launcher.LaunchOptions, *,
+              topics: Sequence[str] = STACK_TOPICS, timeout: float = 60.0,
+              namespace: str = '') -> StackRun:
+    """Build the launcher's nodes in ``context``, spin ``executor`` until the plant ends.
+
+    The caller owns ``executor``; the nodes and the probe node are removed from
+    it and destroyed before returning (the messages stay in the probe).
+    """
+    import rclpy
+
+    specs, config, duration = launcher.stack_specs(options, extra_odom_readers=1)
+    probe_node = rclpy.create_node('stack_probe', context=context,
+                                   namespace=namespace or None)
+    probe = Probe(probe_node, topics)
+    nodes = launcher.build_nodes(specs, context, namespace)
+    run = StackRun(nodes, probe, specs, config, duration)
+    try:
+        for node in (probe_node, *nodes):
+            executor.add_node(node)
+        plant = run.node(launcher.PLANT)
+        assert spin(executor, plant.finished.done, timeout), (
+            f'the plant stopped at {plant.plant.time_ns / NS} s of {duration} s')
+        # The last messages: the state at the end reaches the probe.
+        end = plant.plant.time_ns
+        spin(executor, lambda: 'odom' not in topics or (probe.stamps('odom') or [0])[-1] >= end,
+             5.0)
+        run.extra['stalls'] = plant.stalls
+        run.extra['startup_retries'] = plant.startup_retries
+    finally:
+        for node in (*nodes, probe_node):
+            executor.remove_node(node)
+            node.destroy_node()
+    return run

@@ -1,0 +1,507 @@
+"""``plant_simulator``: the robot (:class:`tiltrov_ros.core.plant.Plant`) as a ROS node.
+
+Subscribes ``thrust_cmd`` (thruster_1..4, effort N) and ``tilt_cmd``
+(tilt_front, tilt_rear, position rad) and hands them to the actuator models
+(``Plant.command``); publishes at every plant step, stamped with the sim time
+t_i in integer ns (the first message is the initial state at t = 0):
+``odom``, then ``joint_states``, then ``/clock`` (so whoever sees the clock at
+t_i knows the state at t_i is out).
+
+Modes (parameter ``mode``):
+
+* ``lockstep``: as fast as possible and deterministic. The plant steps freely
+  between control ticks; at a tick t_i (a multiple of ``control_period``) it
+  does not step until it holds a ``thrust_cmd`` *and* a ``tilt_cmd`` stamped
+  t_i, which it applies before stepping (zero-order hold until the next
+  tick), exactly as :func:`tiltrov_ros.core.runner.run` does. Before the
+  initial state it waits until ``startup_subscribers`` readers are matched on
+  ``odom`` and both command topics have a publisher, then ``startup_delay``
+  wall seconds more. If the commands of a tick
+  have not come after ``stall_timeout`` wall seconds, the wait is reported on
+  ``/diagnostics`` as a stall and the state at t_i (joint_states, odom, clock)
+  is published again, so a lost message or a restarted controller resumes the
+  run; every node of the stack answers a repeated stamp idempotently.
+* ``realtime``: a wall-clock timer steps the plant ``real_time_factor`` times
+  faster than real time; the latest command (by stamp) is in force. Time
+  starts once ``startup_subscribers`` readers are matched on ``odom`` (0: at
+  once), so a controller started with the plant is there from t = 0.
+
+With ``duration`` > 0 the plant stops at that sim time (after publishing the
+state at ``duration``) and :attr:`PlantSimulator.finished` completes; with
+``exit_at_end`` the process then exits with code 0 once every reader has
+acknowledged the last messages (the launcher ends the run on it).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+import math
+import sys
+from typing import Any
+
+from nav_msgs.msg import Odometry
+from rclpy.duration import Duration
+from rclpy.parameter import Parameter
+from rclpy.task import Future
+from rosgraph_msgs.msg import Clock as ClockMsg
+from sensor_msgs.msg import JointState
+
+from tiltrov_ros.core.disturbances import Disturbances
+from tiltrov_ros.core.errors import ParameterError
+from tiltrov_ros.core.kinematics import quat_from_euler
+from tiltrov_ros.core.params import RobotParams
+from tiltrov_ros.core.plant import Plant
+from tiltrov_ros.core.scenarios import InitialState, Scenario, load_scenario
+from tiltrov_ros.core.timebase import seconds, to_ns
+
+from .common import (
+    CLOCK,
+    JOINT_STATES,
+    LOCKSTEP,
+    MODES,
+    ODOM,
+    OK,
+    REALTIME,
+    RELIABLE_QOS,
+    THROTTLE,
+    THRUST_CMD,
+    THRUSTERS,
+    TILT_CMD,
+    TILTS,
+    WARN,
+    Overrides,
+    TiltrovNode,
+    declare_robot,
+    descriptor,
+    fill_joint_state,
+    fill_odometry,
+    format_ns,
+    guarded,
+    joint_values,
+    main_loop,
+    new_joint_state,
+    new_odometry,
+    set_stamp,
+    stamp_ns,
+)
+
+NODE_NAME = 'plant_simulator'
+NAN = math.nan
+#: s (wall): how often the lockstep watchdog looks at the start-up and stall state.
+WATCHDOG_PERIOD = 0.05
+#: s (wall): re-publication period of the initial state until the first commands come.
+STARTUP_RETRY = 0.25
+#: Most plant steps one realtime timer callback catches up before it re-bases.
+MAX_CATCH_UP = 100
+#: Marks a command that was received for a tick but rejected (held: previous stays).
+_REJECTED: list[float] = []
+
+
+@dataclass(frozen=True)
+class PlantConfig:
+    """The plant node's parameters, validated."""
+
+    mode: str
+    real_time_factor: float
+    step_ns: int
+    control_period_ns: int
+    robot: RobotParams               # nominal robot, scenario overrides applied
+    disturbances: Disturbances
+    initial_state: InitialState
+    scenario: str                    # name, path or '' (none)
+    duration_ns: int                 # 0: no end
+    exit_at_end: bool
+    stall_timeout: float             # s, wall
+    startup_subscribers: int
+    startup_delay: float             # s, wall
+
+    def build_plant(self) -> Plant:
+        """The plant at the initial state, as ``StackConfig.build_plant`` makes it."""
+        init = self.initial_state
+        return Plant(self.robot, self.disturbances, step_ns=self.step_ns,
+                     position=init.position, quaternion=quat_from_euler(*init.euler),
+                     nu=init.nu)
+
+
+def declare_parameters(node: TiltrovNode) -> PlantConfig:
+    """Declare the plant's parameters on ``node`` and return them validated."""
+    d = node.declare_parameter
+    mode = d('mode', REALTIME, descriptor(
+        'lockstep: as fast as possible, deterministic, waits at each control tick for '
+        'the thrust_cmd and tilt_cmd stamped with it; realtime: wall-clock stepping',
+        read_only=True, constraints='lockstep or realtime')).value
+    rtf = d('real_time_factor', 1.0, descriptor(
+        'realtime mode: sim seconds per wall second (1.0 = wall clock)',
+        floating=(0.001, 1000.0))).value
+    step_size = d('step_size', 0.01, descriptor(
+        'plant step h, s (RK4); the control period must be a multiple of it',
+        read_only=True, floating=(1e-5, 1.0))).value
+    scenario_name = d('scenario', '', descriptor(
+        'scenario name (config/scenarios/<name>.yaml) or path: initial state, '
+        'disturbances and robot overrides; empty: at rest at the origin, no disturbance',
+        read_only=True)).value
+    # Declared without a default: unset means "the scenario's value".
+    com_error = d('com_error', Parameter.Type.DOUBLE_ARRAY, descriptor(
+        "true center of gravity minus the nominal one, base_link_frd, m (the paper's "
+        'disturbance); overrides the scenario; unset: the scenario\'s (or zero)',
+        read_only=True, constraints='3 finite numbers')).value
+    current = d('current', Parameter.Type.DOUBLE_ARRAY, descriptor(
+        "mean ocean current in odom_ned, m/s; overrides the scenario's; unset: the "
+        "scenario's (or zero)", read_only=True, constraints='3 finite numbers')).value
+    duration = d('duration', 0.0, descriptor(
+        'sim time at which the run ends, s (a whole number of steps); 0: never',
+        read_only=True, floating=(0.0, 1e9))).value
+    exit_at_end = d('exit_at_end', False, descriptor(
+        'exit the process (code 0) when duration is reached', read_only=True)).value
+    stall_timeout = d('stall_timeout', 1.0, descriptor(
+        'lockstep: wall seconds without the commands of a tick before a stall is '
+        'reported and the tick\'s state published again', floating=(0.01, 3600.0))).value
+    startup_subscribers = d('startup_subscribers', 1, descriptor(
+        'odom readers to wait for before publishing the initial state (realtime: before '
+        'time starts); 0: start at once', read_only=True, integer=(0, 1000))).value
+    startup_delay = d('startup_delay', 0.0, descriptor(
+        'wall seconds to wait once the readers are there, so that every other '
+        'pair of endpoints (e.g. a bag recorder and the allocator) is matched too',
+        read_only=True, floating=(0.0, 60.0))).value
+    robot, period = declare_robot(node)
+    node.check_overrides()
+
+    if mode not in MODES:
+        raise ParameterError('mode', f'got {mode!r}; allowed: {", ".join(MODES)}')
+    scenario: Scenario | None = load_scenario(scenario_name) if scenario_name else None
+    disturbances = scenario.disturbances if scenario is not None else Disturbances()
+    if com_error is not None:
+        disturbances = replace(disturbances, com_error=tuple(com_error))
+    if current is not None:
+        disturbances = replace(disturbances, current=tuple(current))
+    step_ns = to_ns(step_size)
+    period_ns = to_ns(period)
+    if period_ns % step_ns:
+        raise ParameterError('control_period', f'got {period!r} s; allowed: a whole '
+                             f'multiple of step_size ({step_size!r} s)')
+    duration_ns = to_ns(duration)
+    if duration_ns % step_ns:
+        raise ParameterError('duration', f'got {duration!r} s; allowed: 0 or a whole '
+                             f'number of steps ({step_size!r} s)')
+    return PlantConfig(
+        mode=mode, real_time_factor=float(rtf), step_ns=step_ns, control_period_ns=period_ns,
+        robot=scenario.robot(robot) if scenario is not None else robot,
+        disturbances=disturbances,
+        initial_state=scenario.initial_state if scenario is not None else InitialState(),
+        scenario=scenario_name, duration_ns=duration_ns, exit_at_end=bool(exit_at_end),
+        stall_timeout=float(stall_timeout), startup_subscribers=int(startup_subscribers),
+        startup_delay=float(startup_delay))
+
+
+class PlantSimulator(TiltrovNode):
+    """The simulated robot (see the module docstring)."""
+
+    def __init__(self, *, node_name: str = NODE_NAME, namespace: str | None = None,
+                 context: Any = None, cli_args: Sequence[str] | None = None,
+                 parameter_overrides: Overrides = None) -> None:
+        super().__init__(node_name, namespace=namespace, context=context, cli_args=cli_args,
+                         parameter_overrides=parameter_overrides)
+        self.config = declare_parameters(self)
+        self.plant = self.config.build_plant()
+        self.lockstep = self.config.mode == LOCKSTEP
+        #: Completes (result: final sim time, ns) when ``duration`` is reached.
+        self.finished: Future = Future()
+
+        self._odom_pub = self.create_publisher(Odometry, ODOM, RELIABLE_QOS)
+        self._joint_pub = self.create_publisher(JointState, JOINT_STATES, RELIABLE_QOS)
+        self._clock_pub = self.create_publisher(ClockMsg, CLOCK, RELIABLE_QOS)
+        self._odom_msg = new_odometry()
+        self._joint_msg = new_joint_state(TILTS + THRUSTERS)
+        self._clock_msg = ClockMsg()
+        self.create_subscription(JointState, THRUST_CMD, self._on_thrust_cmd, RELIABLE_QOS)
+        self.create_subscription(JointState, TILT_CMD, self._on_tilt_cmd, RELIABLE_QOS)
+
+        # lockstep: tick ns -> [thrusts, tilts] (None: not yet; _REJECTED: bad message)
+        self._pending: dict[int, list[list[float] | None]] = {}
+        self._started = False
+        self._started_at = 0                       # steady ns of the initial state
+        self._peers_since: int | None = None       # steady ns when the peers were there
+        self._commands_seen = False
+        self._waiting_since: int | None = None     # steady ns, while waiting at a tick
+        self._stalled = False                      # the present wait is a stall
+        self._last_applied = [-1, -1]              # realtime: stamps of the held commands
+        self.stalls = 0
+        self.startup_retries = 0
+        self.republished = 0
+        self.rejected_messages = 0
+        self.overruns = 0
+        self._diag_mark = (self.steady_ns(), self.plant.time_ns)
+        self._rtf_achieved = 0.0
+
+        self._step_timer = None
+        self._watchdog_timer = self.create_timer(WATCHDOG_PERIOD, self._watchdog,
+                                                 clock=self.steady)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+        self.start_diagnostics()
+        c = self.config
+        self.get_logger().info(
+            f'{c.mode}{"" if self.lockstep else f" x{c.real_time_factor:g}"}, scenario '
+            f'{c.scenario or "(none)"}, step {seconds(c.step_ns):g} s, control period '
+            f'{seconds(c.control_period_ns):g} s, duration '
+            f'{format_ns(c.duration_ns) if c.duration_ns else "unlimited"}')
+
+    # -- state out -----------------------------------------------------------------
+
+    def _publish_state(self) -> None:
+        """``odom`` (first: the controller's input), ``joint_states``, then ``/clock``."""
+        s = self.plant.sample()
+        ns = s.t_ns
+        self._odom_pub.publish(fill_odometry(self._odom_msg, ns, s.position, s.quaternion,
+                                             s.nu))
+        fill_joint_state(self._joint_msg, ns,
+                         position=(*s.tilts, NAN, NAN, NAN, NAN),
+                         velocity=(*s.tilt_velocities, NAN, NAN, NAN, NAN),
+                         effort=(NAN, NAN, *s.thrusts))
+        self._joint_pub.publish(self._joint_msg)
+        set_stamp(self._clock_msg.clock, ns)
+        self._clock_pub.publish(self._clock_msg)
+
+    def _reached_end(self) -> bool:
+        end = self.config.duration_ns
+        return bool(end) and self.plant.time_ns >= end
+
+    def _finish(self) -> None:
+        if not self.finished.done():
+            self._waiting_since = None
+            t = self.plant.time_ns
+            wall = (self.steady_ns() - self._started_at) / 1e9
+            self.get_logger().info(
+                f'reached the end of the run at {format_ns(t)}: {wall:.3f} s wall since '
+                f'the initial state, real-time factor {seconds(t) / max(wall, 1e-9):.2f}')
+            self.finished.set_result(t)
+
+    # -- commands in ---------------------------------------------------------------
+
+    @guarded
+    def _on_thrust_cmd(self, msg: JointState) -> None:
+        self._on_command(0, msg, THRUSTERS, 'effort')
+
+    @guarded
+    def _on_tilt_cmd(self, msg: JointState) -> None:
+        self._on_command(1, msg, TILTS, 'position')
+
+    def _on_command(self, kind: int, msg: JointState, names: tuple[str, ...],
+                    field: str) -> None:
+        ns = stamp_ns(msg.header.stamp)
+        values = joint_values(msg, names, field)
+        if values is None:
+            self.rejected_messages += 1
+            self.get_logger().warning(
+                f'rejected a {("thrust_cmd", "tilt_cmd")[kind]} stamped {format_ns(ns)}: '
+                f'needs finite {field} for {", ".join(names)}; the previous command holds',
+                throttle_duration_sec=THROTTLE)
+        self._commands_seen = True
+        if not self.lockstep:
+            if values is not None and ns >= self._last_applied[kind]:
+                self._last_applied[kind] = ns
+                self._command(kind, values)
+            return
+        if ns < self.plant.time_ns or self.finished.done():
+            return   # a re-published answer to a tick already passed
+        entry = self._pending.setdefault(ns, [None, None])
+        entry[kind] = values if values is not None else _REJECTED
+        self._advance()
+
+    def _command(self, kind: int, values: list[float]) -> None:
+        if kind == 0:
+            self.plant.command(thrusts=values)
+        else:
+            self.plant.command(tilts=values)
+
+    # -- lockstep --------------------------------------------------------------------
+
+    def _advance(self) -> None:
+        """Step until a control tick whose commands are missing (or the end)."""
+        if not self._started:
+            return
+        plant = self.plant
+        period = self.config.control_period_ns
+        while True:
+            if self._reached_end():
+                self._finish()
+                return
+            t = plant.time_ns
+            if t % period == 0:
+                entry = self._pending.get(t)
+                if entry is None or entry[0] is None or entry[1] is None:
+                    if self._waiting_since is None:
+                        self._waiting_since = self.steady_ns()
+                    return
+                for kind, values in enumerate(entry):
+                    if values:      # None was excluded above; _REJECTED is empty
+                        self._command(kind, values)
+                for stamp in [s for s in self._pending if s <= t]:
+                    del self._pending[stamp]
+                self._waiting_since = None
+                self._stalled = False
+            plant.step()
+            self._publish_state()
+
+    @guarded
+    def _watchdog(self) -> None:
+        if not self._started:
+            if not self._peers_ready():
+                self._peers_since = None
+                return
+            now = self.steady_ns()
+            if self._peers_since is None:
+                self._peers_since = now
+            if (now - self._peers_since) / 1e9 < self.config.startup_delay:
+                return
+            if not self.lockstep:
+                self.destroy_timer(self._watchdog_timer)
+                self._start_realtime()
+                return
+            self._started = True
+            self._started_at = now
+            self._publish_state()
+            self._advance()
+            return
+        since = self._waiting_since
+        if since is None or self.finished.done():
+            return
+        waited = (self.steady_ns() - since) / 1e9
+        t = self.plant.time_ns
+        if not self._commands_seen:
+            # Start-up: a reader matched late may have missed the initial state.
+            if waited >= STARTUP_RETRY:
+                self.startup_retries += 1
+                self._republish()
+            return
+        if waited >= self.config.stall_timeout:
+            self.stalls += 1
+            self._stalled = True
+            entry = self._pending.get(t, [None, None])
+            missing = [name for name, got in zip((THRUST_CMD, TILT_CMD), entry) if got is None]
+            self.get_logger().warning(
+                f'stall at {format_ns(t)}: no {" and ".join(missing)} stamped with it after '
+                f'{waited:.2f} s; publishing the state at {format_ns(t)} again',
+                throttle_duration_sec=THROTTLE)
+            self._republish()
+
+    def _republish(self) -> None:
+        self.republished += 1
+        self._waiting_since = self.steady_ns()
+        self._publish_state()
+
+    def _peers_ready(self) -> bool:
+        """lockstep: the odom readers and both command publishers; realtime: the readers."""
+        if self._odom_pub.get_subscription_count() < self.config.startup_subscribers:
+            return False
+        return not self.lockstep or (self.count_publishers(THRUST_CMD) > 0
+                                     and self.count_publishers(TILT_CMD) > 0)
+
+    # -- realtime --------------------------------------------------------------------
+
+    def _start_realtime(self) -> None:
+        self._started = True
+        self._started_at = self.steady_ns()
+        self._publish_state()
+        self._rebase()
+        self._make_step_timer()
+
+    def _rebase(self) -> None:
+        self._rt_origin = (self.steady_ns(), self.plant.time_ns)
+
+    def _make_step_timer(self) -> None:
+        if self._step_timer is not None:
+            self.destroy_timer(self._step_timer)
+        period = max(seconds(self.config.step_ns) / self.config.real_time_factor, 0.001)
+        self._step_timer = self.create_timer(period, self._realtime_step, clock=self.steady)
+
+    @guarded
+    def _realtime_step(self) -> None:
+        if self.finished.done():
+            return
+        wall0, sim0 = self._rt_origin
+        due = sim0 + int((self.steady_ns() - wall0) * self.config.real_time_factor)
+        steps = 0
+        while self.plant.time_ns + self.config.step_ns <= due:
+            if self._reached_end():
+                break
+            if steps == MAX_CATCH_UP:
+                self.overruns += 1
+                self.get_logger().warning(
+                    f'cannot keep up with real_time_factor {self.config.real_time_factor:g}; '
+                    'sim time falls behind', throttle_duration_sec=THROTTLE)
+                self._rebase()
+                break
+            self.plant.step()
+            self._publish_state()
+            steps += 1
+        if self._reached_end():
+            self._finish()
+
+    # -- parameters ------------------------------------------------------------------
+
+    def _apply_parameters(self, parameters: list[Parameter]) -> None:
+        """Run-time changes (ranges, types and read-only are checked by rclpy)."""
+        for p in parameters:
+            if p.name == 'real_time_factor':
+                self.config = replace(self.config, real_time_factor=float(p.value))
+                if not self.lockstep:
+                    self._rebase()
+                    self._make_step_timer()
+            elif p.name == 'stall_timeout':
+                self.config = replace(self.config, stall_timeout=float(p.value))
+
+    # -- diagnostics and shutdown ----------------------------------------------------
+
+    def diagnostic_status(self) -> tuple[int, str, dict[str, Any]]:
+        now, t = self.steady_ns(), self.plant.time_ns
+        wall0, sim0 = self._diag_mark
+        if now > wall0:
+            self._rtf_achieved = (t - sim0) / (now - wall0)
+        self._diag_mark = (now, t)
+        level, message = OK, f'{self.config.mode} at {format_ns(t)}'
+        if not self._started:
+            message = f'{self.config.mode}: waiting for the controller and allocator'
+        elif self.finished.done():
+            message = f'finished at {format_ns(t)}'
+        elif self._stalled:
+            level = WARN
+            message = f'stalled at {format_ns(t)}: waiting for thrust_cmd/tilt_cmd'
+        if self.stalls and level == OK:
+            message += f' ({self.stalls} stall(s) so far)'
+        plant = self.plant
+        return level, message, {
+            'mode': self.config.mode, 'sim_time': seconds(t),
+            'real_time_factor_achieved': self._rtf_achieved,
+            'stalls': self.stalls, 'startup_retries': self.startup_retries,
+            'republished_states': self.republished, 'overruns': self.overruns,
+            'rejected_command_messages': self.rejected_messages,
+            'rejected_thrust_commands': plant.thrusters.rejected,
+            'rejected_tilt_commands': plant.servos.rejected,
+            'finished': self.finished.done(),
+        }
+
+    def wait_for_delivery(self, timeout: float = 0.5) -> bool:
+        """Wait (at most ``timeout`` s in all) until every reliable reader acknowledged
+        the last messages (end of run). Fast DDS acknowledges on its heartbeat period,
+        so this is a bounded courtesy: the samples are already on the wire."""
+        deadline = self.steady_ns() + int(timeout * 1e9)
+        acked = True
+        for pub in (self._joint_pub, self._odom_pub, self._clock_pub):
+            left = max(deadline - self.steady_ns(), 0)
+            acked = pub.wait_for_all_acked(Duration(nanoseconds=left)) and acked
+        return acked
+
+
+def main(args: list[str] | None = None) -> int:
+    """``plant_simulator [--ros-args --params-file config/plant_simulator.yaml ...]``."""
+
+    def until(node: Any) -> Future | None:
+        return node.finished if node.config.exit_at_end else None
+
+    return main_loop(PlantSimulator, args, NODE_NAME, until=until,
+                     before_exit=lambda node: node.wait_for_delivery())
+
+
+if __name__ == '__main__':
+    sys.exit(main())

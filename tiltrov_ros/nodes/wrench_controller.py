@@ -1,0 +1,441 @@
+"""``wrench_controller``: the core controllers (pd (16), switching, pid) as a ROS node.
+
+At each control tick, i.e. on an ``odom`` whose stamp t_i is a multiple of
+``control_period``, it calls ``controller.update(seconds(t_i), position,
+quaternion, nu, reference)`` with the floats the messages carry and publishes
+``wrench_cmd`` (frame ``base_link_frd``) stamped t_i. The switching baseline
+also publishes ``tilt_request`` (tilt_front, tilt_rear positions) with the same
+stamp, before the wrench (ARCHITECTURE.md, "The switching baseline").
+
+The reference is the ``setpoint`` (and ``setpoint_velocity``, the feed-forward
+d(eta_d)/dt; zero when ``use_setpoint_velocity`` is false):
+
+* ``mode: lockstep``: the ones stamped t_i. The tick waits for them; if the
+  setpoint velocity alone is still missing after ``input_timeout`` wall
+  seconds it is read as zero (counted on ``/diagnostics``); a missing setpoint
+  is waited for indefinitely (reported), since a wrench without one would
+  break the run's determinism.
+* ``mode: realtime``: the latest received; with none yet, a zero wrench.
+
+A repeated odom stamp (the plant re-publishes a stalled tick) re-publishes the
+answer already given, so the controller's state advances once per tick; a stamp
+earlier than the last answered (a restarted plant, a looped replay) resets the
+controller.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+import sys
+from typing import Any
+
+from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
+from nav_msgs.msg import Odometry
+import numpy as np
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.parameter import Parameter
+from rclpy.serialization import deserialize_message
+from sensor_msgs.msg import JointState
+
+from tiltrov_ros.core.controllers import (
+    CONTROLLER_KINDS,
+    ControllerConfig,
+    ControlOutput,
+    Reference,
+    load_controller_config,
+    make_controller,
+    retune,
+)
+from tiltrov_ros.core.errors import ParameterError
+from tiltrov_ros.core.timebase import seconds, to_ns
+
+from .common import (
+    FRAME_EARTH,
+    LOCKSTEP,
+    MODES,
+    ODOM,
+    OK,
+    REALTIME,
+    RELIABLE_QOS,
+    SETPOINT,
+    SETPOINT_VELOCITY,
+    THROTTLE,
+    TILT_REQUEST,
+    TILTS,
+    WARN,
+    WRENCH_CMD,
+    FloatArray,
+    Overrides,
+    TiltrovNode,
+    cdr_stamp_ns,
+    declare_robot,
+    descriptor,
+    fill_joint_state,
+    fill_wrench,
+    format_ns,
+    guarded,
+    main_loop,
+    new_joint_state,
+    new_wrench,
+    odometry_arrays,
+    pose_arrays,
+    reader_qos,
+    stamp_ns,
+    twist_array,
+)
+
+NODE_NAME = 'wrench_controller'
+#: s (wall): how often the lockstep watchdog looks at a waiting tick.
+WATCHDOG_PERIOD = 0.1
+#: Buffered setpoints (by stamp); older ones are dropped.
+BUFFER = 200
+GAIN_KEYS = ('kp', 'kd', 'ki', 'integral_limit')
+SWITCHING_KEYS = ('hysteresis', 'dwell_time', 'position_scale', 'angle_scale', 'deadband',
+                  'settle_time')
+_GAIN_DOC = {
+    'kp': 'proportional gains (x y z roll pitch yaw), N/m and N m/rad',
+    'kd': 'derivative gains, N s/m and N m s/rad',
+    'ki': 'pid only: integral gains, N/(m s) and N m/(rad s)',
+    'integral_limit': 'pid only: bound on |ki * integral(e)| per DOF, N and N m (anti-windup)',
+}
+_SWITCHING_DOC = {
+    'hysteresis': "switch when the other group's error exceeds (1 + hysteresis) x the "
+                  "current group's (>= 0)",
+    'dwell_time': 'least time between two switches, s (>= 0)',
+    'position_scale': 'normalises position errors, m (> 0)',
+    'angle_scale': 'normalises angle errors, rad (> 0)',
+    'deadband': 'normalised error under which no switch happens (>= 0)',
+    'settle_time': 'added to the servo travel before thrust resumes, s (>= 0)',
+}
+
+
+@dataclass
+class _Tick:
+    """An odom at a control tick, waiting for its setpoint."""
+
+    ns: int
+    position: FloatArray
+    quaternion: FloatArray
+    nu: FloatArray
+    since: int          # steady ns when it arrived
+
+
+def _config_mapping(get: Any) -> dict[str, Any]:
+    """The ``wrench_controller`` parameters as ControllerConfig.from_mapping wants them."""
+    return {
+        'controller': get('controller'),
+        'gains': {key: list(get(f'gains.{key}')) for key in GAIN_KEYS},
+        'switching': {key: get(f'switching.{key}') for key in SWITCHING_KEYS},
+    }
+
+
+class WrenchController(TiltrovNode):
+    """The wrench controller (see the module docstring)."""
+
+    def __init__(self, *, node_name: str = NODE_NAME, namespace: str | None = None,
+                 context: Any = None, cli_args: Sequence[str] | None = None,
+                 parameter_overrides: Overrides = None) -> None:
+        super().__init__(node_name, namespace=namespace, context=context, cli_args=cli_args,
+                         parameter_overrides=parameter_overrides)
+        self._declare_parameters()
+        self.period_ns = to_ns(self.control_period)
+        self.controller = make_controller(self.controller_config, self.robot)
+        self.kind = self.controller_config.kind
+        self.lockstep = self.mode == LOCKSTEP
+
+        self._wrench_pub = self.create_publisher(WrenchStamped, WRENCH_CMD, RELIABLE_QOS)
+        self._tilt_pub = (self.create_publisher(JointState, TILT_REQUEST, RELIABLE_QOS)
+                          if self.kind == 'switching' else None)
+        # Raw: only the odometry at control ticks (1 in control_period / step_size) is
+        # deserialized; the stamp of the others is read from the CDR header.
+        self.create_subscription(Odometry, ODOM, self._on_odom_raw, reader_qos(self.mode),
+                                 raw=True)
+        self.create_subscription(PoseStamped, SETPOINT, self._on_setpoint, RELIABLE_QOS)
+        if self.use_velocity:
+            self.create_subscription(TwistStamped, SETPOINT_VELOCITY, self._on_velocity,
+                                     RELIABLE_QOS)
+
+        self._setpoints: dict[int, tuple[FloatArray, FloatArray]] = {}
+        self._velocities: dict[int, FloatArray] = {}
+        self._latest_setpoint: tuple[int, FloatArray, FloatArray] | None = None
+        self._latest_velocity: tuple[int, FloatArray] | None = None
+        self._tick: _Tick | None = None
+        self._last_ns = -1
+        self._last_msgs: tuple[WrenchStamped, JointState | None] | None = None
+        self._last_tilts: tuple[float, float] = (0.0, 0.0)
+        self._warned_tick = -1
+        self.ticks = 0
+        self.republished = 0
+        self.setpoint_waits = 0
+        self.velocity_timeouts = 0
+        self.no_setpoint = 0
+        self.rejected_messages = 0
+        self.resets = 0
+        self.last_mode = ''
+
+        if self.lockstep:
+            self.create_timer(WATCHDOG_PERIOD, self._watchdog, clock=self.steady)
+        self.add_on_set_parameters_callback(self._validate_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+        self.start_diagnostics()
+        self.get_logger().info(f'{self.kind} controller, {self.mode}, control period '
+                               f'{self.control_period:g} s')
+
+    # -- parameters ------------------------------------------------------------------
+
+    def _declare_parameters(self) -> None:
+        shipped = load_controller_config()
+        d = self.declare_parameter
+        d('controller', shipped.kind, descriptor(
+            'control law: pd (eq. 16), switching (baseline: tilts 0 or 90 deg, with '
+            'tilt_request), pid (pd + g(eta) + clamped integral)', read_only=True,
+            constraints=' | '.join(CONTROLLER_KINDS)))
+        self.mode = d('mode', REALTIME, descriptor(
+            'lockstep: wait for the setpoint stamped with each tick (deterministic); '
+            'realtime: use the latest setpoint', read_only=True,
+            constraints='lockstep or realtime')).value
+        self.use_velocity = bool(d('use_setpoint_velocity', True, descriptor(
+            'use setpoint_velocity as the feed-forward d(eta_d)/dt (false: zero)',
+            read_only=True)).value)
+        self.input_timeout = d('input_timeout', 1.0, descriptor(
+            'lockstep: wall seconds to wait for the setpoint_velocity of a tick before '
+            'reading it as zero', floating=(0.001, 3600.0))).value
+        for key in GAIN_KEYS:
+            d(f'gains.{key}', [float(v) for v in getattr(shipped.gains, key)], descriptor(
+                _GAIN_DOC[key], constraints='6 finite numbers >= 0 (x y z roll pitch yaw)'))
+        for key in SWITCHING_KEYS:
+            d(f'switching.{key}', float(getattr(shipped.switching, key)), descriptor(
+                'switching only: ' + _SWITCHING_DOC[key], floating=(0.0, 1e6)))
+        self.robot, self.control_period = declare_robot(self)
+        self.check_overrides()
+        if self.mode not in MODES:
+            raise ParameterError('mode', f'got {self.mode!r}; allowed: {", ".join(MODES)}')
+        self.controller_config = ControllerConfig.from_mapping(
+            _config_mapping(lambda name: self.get_parameter(name).value))
+
+    def _validate_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
+        """Check gains.* and switching.* changes with the core's validation."""
+        changes = {p.name: p.value for p in parameters
+                   if p.name.startswith(('gains.', 'switching.'))}
+        if not changes:
+            return SetParametersResult(successful=True)
+
+        def get(name: str) -> Any:
+            return changes[name] if name in changes else self.get_parameter(name).value
+
+        try:
+            ControllerConfig.from_mapping(_config_mapping(get))
+        except ParameterError as exc:
+            return self.reject(str(exc))
+        return SetParametersResult(successful=True)
+
+    def _apply_parameters(self, parameters: list[Parameter]) -> None:
+        if not any(p.name.startswith(('gains.', 'switching.')) for p in parameters):
+            return
+        self.controller_config = ControllerConfig.from_mapping(
+            _config_mapping(lambda name: self.get_parameter(name).value))
+        self.controller = retune(self.controller, self.controller_config, self.robot)
+        self.get_logger().info('gains changed: ' + ', '.join(
+            f'{p.name} = {p.value!s}' for p in parameters))
+
+    # -- inputs ----------------------------------------------------------------------
+
+    @guarded
+    def _on_odom_raw(self, data: bytes) -> None:
+        if cdr_stamp_ns(data) % self.period_ns == 0:
+            self.on_odom(deserialize_message(data, Odometry))
+
+    def on_odom(self, msg: Odometry) -> None:
+        """An odometry message (the raw callback passes those at control ticks)."""
+        ns = stamp_ns(msg.header.stamp)
+        if ns % self.period_ns:
+            return
+        if ns == self._last_ns and self._last_msgs is not None:
+            self.republished += 1
+            self._publish(*self._last_msgs)
+            return
+        if ns < self._last_ns:
+            self._reset(f'odometry went back from {format_ns(self._last_ns)} to '
+                        f'{format_ns(ns)}')
+        position, quaternion, nu = odometry_arrays(msg)
+        if not (np.all(np.isfinite(position)) and np.all(np.isfinite(quaternion))
+                and np.all(np.isfinite(nu)) and np.any(quaternion != 0.0)):
+            self.rejected_messages += 1
+            self.get_logger().error(f'odom stamped {format_ns(ns)} is not finite (or a zero '
+                                    'quaternion); publishing a zero wrench',
+                                    throttle_duration_sec=THROTTLE)
+            self._publish_safe(ns)
+            return
+        self._tick = _Tick(ns, position, quaternion, nu, self.steady_ns())
+        self._try_compute()
+
+    @guarded
+    def _on_setpoint(self, msg: PoseStamped) -> None:
+        if msg.header.frame_id not in ('', FRAME_EARTH):
+            self.rejected_messages += 1
+            self.get_logger().error(f'ignoring a setpoint in frame {msg.header.frame_id!r}: '
+                                    f'it must be in {FRAME_EARTH}',
+                                    throttle_duration_sec=THROTTLE)
+            return
+        ns = stamp_ns(msg.header.stamp)
+        position, quaternion = pose_arrays(msg)
+        if not (np.all(np.isfinite(position)) and np.all(np.isfinite(quaternion))
+                and np.any(quaternion != 0.0)):
+            self.rejected_messages += 1
+            self.get_logger().error(f'ignoring a setpoint stamped {format_ns(ns)}: not '
+                                    'finite or a zero quaternion',
+                                    throttle_duration_sec=THROTTLE)
+            return
+        self._setpoints[ns] = (position, quaternion)
+        self._latest_setpoint = (ns, position, quaternion)
+        _trim(self._setpoints)
+        self._try_compute()
+
+    @guarded
+    def _on_velocity(self, msg: TwistStamped) -> None:
+        ns = stamp_ns(msg.header.stamp)
+        velocity = twist_array(msg)
+        if not np.all(np.isfinite(velocity)):
+            self.rejected_messages += 1
+            self.get_logger().error(f'ignoring a setpoint_velocity stamped {format_ns(ns)}: '
+                                    'not finite', throttle_duration_sec=THROTTLE)
+            return
+        self._velocities[ns] = velocity
+        self._latest_velocity = (ns, velocity)
+        _trim(self._velocities)
+        self._try_compute()
+
+    # -- the tick --------------------------------------------------------------------
+
+    def _try_compute(self, velocity_timed_out: bool = False) -> None:
+        tick = self._tick
+        if tick is None:
+            return
+        ns = tick.ns
+        if self.lockstep:
+            setpoint = self._setpoints.get(ns)
+            if setpoint is None:
+                return
+            velocity = self._velocities.get(ns) if self.use_velocity else np.zeros(6)
+            if velocity is None:
+                if not velocity_timed_out:
+                    return
+                velocity = np.zeros(6)
+        else:
+            if self._latest_setpoint is None:
+                self._tick = None
+                self.no_setpoint += 1
+                self.get_logger().warning('no setpoint received yet: publishing a zero wrench',
+                                          throttle_duration_sec=THROTTLE)
+                self._publish_safe(ns)
+                return
+            sp_ns, position, quaternion = self._latest_setpoint
+            setpoint = (position, quaternion)
+            velocity = self._velocities.get(sp_ns) if self.use_velocity else None
+            if velocity is None:
+                velocity = (self._latest_velocity[1] if self.use_velocity
+                            and self._latest_velocity is not None else np.zeros(6))
+        self._tick = None
+        reference = Reference(setpoint[0], setpoint[1], velocity)
+        out = self.controller.update(seconds(ns), tick.position, tick.quaternion, tick.nu,
+                                     reference)
+        self._answer(ns, out)
+        for buffer in (self._setpoints, self._velocities):
+            for stamp in [s for s in buffer if s < ns]:
+                del buffer[stamp]
+
+    def _answer(self, ns: int, out: ControlOutput) -> None:
+        wrench = fill_wrench(new_wrench(), ns, out.wrench)
+        tilt_msg = None
+        if self._tilt_pub is not None:
+            tilts = out.tilt_request if out.tilt_request is not None else self._last_tilts
+            self._last_tilts = (float(tilts[0]), float(tilts[1]))
+            tilt_msg = fill_joint_state(new_joint_state(TILTS), ns, position=self._last_tilts)
+        self.ticks += 1
+        self.last_mode = out.mode
+        self._last_ns = ns
+        self._last_msgs = (wrench, tilt_msg)
+        self._publish(wrench, tilt_msg)
+
+    def _publish(self, wrench: WrenchStamped, tilt_msg: JointState | None) -> None:
+        if tilt_msg is not None and self._tilt_pub is not None:
+            self._tilt_pub.publish(tilt_msg)
+        self._wrench_pub.publish(wrench)
+
+    def _publish_safe(self, ns: int) -> None:
+        """A zero wrench (and the tilts last requested) stamped ``ns``."""
+        self._answer(ns, ControlOutput(np.zeros(6), self._last_tilts, 'safe'))
+
+    def _reset(self, why: str) -> None:
+        self.resets += 1
+        self.get_logger().info(f'{why}: resetting the controller')
+        self.controller.reset()
+        self._setpoints.clear()
+        self._velocities.clear()
+        self._last_ns = -1
+        self._last_msgs = None
+
+    @guarded
+    def _watchdog(self) -> None:
+        tick = self._tick
+        if tick is None:
+            return
+        waited = (self.steady_ns() - tick.since) / 1e9
+        if waited < self.input_timeout:
+            return
+        if tick.ns in self._setpoints:
+            self.velocity_timeouts += 1
+            self.get_logger().warning(f'no setpoint_velocity stamped {format_ns(tick.ns)} '
+                                      f'after {waited:.2f} s: using zero feed-forward',
+                                      throttle_duration_sec=THROTTLE)
+            self._try_compute(velocity_timed_out=True)
+        elif self._warned_tick != tick.ns:
+            self._warned_tick = tick.ns
+            self.setpoint_waits += 1
+            self.get_logger().warning(f'waiting for the setpoint stamped {format_ns(tick.ns)} '
+                                      f'({waited:.2f} s so far)', throttle_duration_sec=THROTTLE)
+
+    def on_callback_error(self, callback: str, exc: Exception) -> None:
+        super().on_callback_error(callback, exc)
+        tick, self._tick = self._tick, None
+        if tick is not None and tick.ns != self._last_ns:
+            self._publish_safe(tick.ns)
+
+    # -- diagnostics -----------------------------------------------------------------
+
+    def diagnostic_status(self) -> tuple[int, str, dict[str, Any]]:
+        level, message = OK, f'{self.kind}: {self.ticks} ticks'
+        tick = self._tick
+        if (tick is not None and self.lockstep
+                and (self.steady_ns() - tick.since) / 1e9 >= self.input_timeout):
+            level = WARN
+            message = f'waiting for the setpoint stamped {format_ns(tick.ns)}'
+        elif self.rejected_messages or self.velocity_timeouts or self.no_setpoint:
+            level = WARN
+            message += (f'; {self.rejected_messages} rejected input(s), '
+                        f'{self.velocity_timeouts} velocity timeout(s), '
+                        f'{self.no_setpoint} tick(s) without setpoint')
+        return level, message, {
+            'controller': self.kind, 'mode': self.mode, 'ticks': self.ticks,
+            'last_tick': seconds(max(self._last_ns, 0)), 'control_mode': self.last_mode,
+            'republished': self.republished, 'setpoint_waits': self.setpoint_waits,
+            'velocity_timeouts': self.velocity_timeouts,
+            'ticks_without_setpoint': self.no_setpoint,
+            'rejected_messages': self.rejected_messages, 'resets': self.resets,
+        }
+
+
+def _trim(buffer: dict[int, Any]) -> None:
+    if len(buffer) > BUFFER:
+        for stamp in sorted(buffer)[:len(buffer) - BUFFER]:
+            del buffer[stamp]
+
+
+def main(args: list[str] | None = None) -> int:
+    """``wrench_controller [--ros-args --params-file config/wrench_controller.yaml ...]``."""
+    return main_loop(WrenchController, args, NODE_NAME)
+
+
+if __name__ == '__main__':
+    sys.exit(main())
