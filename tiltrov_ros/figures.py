@@ -71,9 +71,11 @@ def _labels(logs: Sequence[RunLog], labels: Sequence[str] | None) -> list[str]:
     return list(labels)
 
 
-def _title(logs: Sequence[RunLog]) -> str:
-    names = sorted({str(log.meta.get('scenario', '')) for log in logs} - {''})
-    return ', '.join(names)
+def _title(logs: Sequence[RunLog], what: str) -> str:
+    """``'<scenarios>: <what>'``, or ``what`` alone for runs without a scenario (bags
+    recorded without run_info)."""
+    names = sorted({str(log.meta.get('scenario') or '') for log in logs} - {''})
+    return f'{", ".join(names)}: {what}' if names else what
 
 
 def _finish(fig: Figure, axes: Sequence[Axes], title: str, legend: bool = True) -> Figure:
@@ -109,7 +111,7 @@ def errors_figure(logs: Sequence[RunLog], labels: Sequence[str] | None = None) -
         ax.set_title(f'({"abcdef"[k]})', loc='left', fontsize='small')
         if k >= 3:
             ax.set_xlabel('time [s]')
-    return _finish(fig, axes, _title(logs) + ': error eta_d - eta')
+    return _finish(fig, axes, _title(logs, 'error eta_d - eta'))
 
 
 def tilts_figure(logs: Sequence[RunLog], labels: Sequence[str] | None = None) -> Figure:
@@ -130,7 +132,7 @@ def tilts_figure(logs: Sequence[RunLog], labels: Sequence[str] | None = None) ->
         ax.set_ylim(-100, 100)
         ax.set_yticks([-90, -45, 0, 45, 90])
     axes[-1].set_xlabel('time [s]')
-    return _finish(fig, list(axes), _title(logs) + ': tilt angles')
+    return _finish(fig, list(axes), _title(logs, 'tilt angles'))
 
 
 def tracking_figure(logs: Sequence[RunLog], labels: Sequence[str] | None = None) -> Figure:
@@ -160,7 +162,7 @@ def tracking_figure(logs: Sequence[RunLog], labels: Sequence[str] | None = None)
     ax_att.set_xlabel('time [s]')
     ax_att.set_ylabel('attitude error |e_rpy| [deg]')
     ax_att.set_title('(c) orientation error', loc='left', fontsize='small')
-    return _finish(fig, [ax_path, ax_pos, ax_att], _title(logs) + ': tracking')
+    return _finish(fig, [ax_path, ax_pos, ax_att], _title(logs, 'tracking'))
 
 
 def wrench_figure(log: RunLog, label: str | None = None) -> Figure:
@@ -176,7 +178,7 @@ def wrench_figure(log: RunLog, label: str | None = None) -> Figure:
         if k >= 3:
             ax.set_xlabel('time [s]')
     name = label if label is not None else run_label(log)
-    return _finish(fig, axes, f'{_title([log])}: body wrench, {name}')
+    return _finish(fig, axes, _title([log], f'body wrench, {name}'))
 
 
 def overlay_figure(logs: Sequence[RunLog], labels: Sequence[str] | None = None) -> Figure:
@@ -195,7 +197,7 @@ def overlay_figure(logs: Sequence[RunLog], labels: Sequence[str] | None = None) 
         ax.set_ylabel(_STATE_LABELS[k])
         if k >= 3:
             ax.set_xlabel('time [s]')
-    return _finish(fig, axes, _title(logs) + ': pose and reference')
+    return _finish(fig, axes, _title(logs, 'pose and reference'))
 
 
 def _slug(text: str) -> str:
@@ -216,7 +218,8 @@ def write_figures(logs: Sequence[RunLog], out_dir: str | Path, *, prefix: str = 
 
     Names: ``<prefix>errors.png``, ``<prefix>tilts.png``, ``<prefix>tracking.png``,
     ``<prefix>overlay.png`` and one ``<prefix>wrench_<controller>.png`` per run
-    (``_2``, ``_3`` ... when two runs share a controller).
+    (its label for a run without a controller in its meta; ``_2``, ``_3`` ...
+    when two runs share a controller).
     """
     unknown = set(which) - set(FIGURES)
     if unknown:
@@ -235,7 +238,7 @@ def write_figures(logs: Sequence[RunLog], out_dir: str | Path, *, prefix: str = 
         if key == 'wrench':
             seen: dict[str, int] = {}
             for log, name in zip(logs, names):
-                stem = _slug(str(log.meta.get('controller', 'run')))
+                stem = _slug(str(log.meta.get('controller') or name))
                 seen[stem] = seen.get(stem, 0) + 1
                 suffix = '' if seen[stem] == 1 else f'_{seen[stem]}'
                 written.append(save(wrench_figure(log, name),
