@@ -14,7 +14,9 @@ its global backend are never touched.
   and attitude error norms, runs overlaid;
 * :func:`wrench_figure` - demanded (``wrench_cmd``) and achieved wrench, six
   panels, one run;
-* :func:`overlay_figure` - eta and eta_d of several runs, six panels.
+* :func:`overlay_figure` - eta and eta_d of several runs, six panels;
+* :func:`allocation_figure` - allocations of the same wrenches compared
+  (``tiltrov replay --through allocator``).
 
 :func:`write_figures` saves them under fixed names (``errors.png``,
 ``tilts.png``, ``tracking.png``, ``overlay.png``, ``wrench_<label>.png``, with
@@ -24,7 +26,7 @@ same runs give the same files.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 import math
 from pathlib import Path
 import re
@@ -34,7 +36,7 @@ from matplotlib.figure import Figure
 import numpy as np
 
 from tiltrov_ros.core.metrics import control_errors
-from tiltrov_ros.core.runlog import RunLog
+from tiltrov_ros.core.runlog import FloatArray, RunLog
 
 CONTROLLER_LABELS = {
     'pd': 'PD (16), proposed',
@@ -198,6 +200,37 @@ def overlay_figure(logs: Sequence[RunLog], labels: Sequence[str] | None = None) 
         if k >= 3:
             ax.set_xlabel('time [s]')
     return _finish(fig, axes, _title(logs, 'pose and reference'))
+
+
+def allocation_figure(t: FloatArray, weighted_error: Mapping[str, FloatArray],
+                      tilts: Mapping[str, FloatArray], title: str = '') -> Figure:
+    """Allocations of the same wrenches compared (``tiltrov replay --through allocator``).
+
+    (a) the weighted wrench error ||W (achieved - demanded)|| of each over time
+    (symmetric log scale: exact answers sit at 0); (b), (c) the commanded tilts
+    alpha and beta (deg) of each.
+    """
+    fig = Figure(figsize=(11, 7.5))
+    ax_err, ax_front, ax_rear = fig.subplots(3, 1, sharex=True)
+    styles = ('-', '--', ':', '-.')
+    deg = 180 / math.pi
+    for i, (name, error) in enumerate(weighted_error.items()):
+        style = styles[i % len(styles)]
+        ax_err.step(t, error, where='post', linestyle=style, linewidth=1.0, label=name)
+        ax_front.step(t, tilts[name][:, 0] * deg, where='post', linestyle=style, linewidth=1.0,
+                      label=name)
+        ax_rear.step(t, tilts[name][:, 1] * deg, where='post', linestyle=style, linewidth=1.0,
+                     label=name)
+    ax_err.set_yscale('symlog', linthresh=1e-3)
+    ax_err.set_ylabel('weighted wrench error')
+    ax_err.set_title('(a) ||W (achieved - wrench_cmd)||', loc='left', fontsize='small')
+    ax_front.set_ylabel('tilt_front [deg]')
+    ax_front.set_title('(b) front tilt (alpha), commanded', loc='left', fontsize='small')
+    ax_rear.set_ylabel('tilt_rear [deg]')
+    ax_rear.set_title('(c) rear tilt (beta), commanded', loc='left', fontsize='small')
+    ax_rear.set_xlabel('time [s]')
+    heading = 'allocation of the recorded wrench_cmd'
+    return _finish(fig, [ax_err, ax_front, ax_rear], f'{title}: {heading}' if title else heading)
 
 
 def _slug(text: str) -> str:

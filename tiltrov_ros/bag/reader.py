@@ -213,7 +213,7 @@ def _times(stamps: NDArray[np.int64]) -> FloatArray:
     return np.array([seconds(int(ns)) for ns in stamps], dtype=float)
 
 
-def _exact(ticks: NDArray[np.int64], series: Series | None, column: str,
+def rows_at(ticks: NDArray[np.int64], series: Series | None, column: str,
            width: int) -> tuple[FloatArray, int]:
     """Rows of ``series`` stamped exactly at ``ticks``; NaN rows where absent."""
     out = np.full((len(ticks), width), NAN)
@@ -225,7 +225,7 @@ def _exact(ticks: NDArray[np.int64], series: Series | None, column: str,
     return out, int(len(ticks) - hit.sum())
 
 
-def _as_of(ticks: NDArray[np.int64], series: Series | None, column: str,
+def rows_as_of(ticks: NDArray[np.int64], series: Series | None, column: str,
            width: int) -> tuple[FloatArray, int]:
     """Rows of ``series`` with the latest stamp at or before each tick; NaN before the first."""
     out = np.full((len(ticks), width), NAN)
@@ -237,16 +237,19 @@ def _as_of(ticks: NDArray[np.int64], series: Series | None, column: str,
     return out, int(len(ticks) - hit.sum())
 
 
-def find_namespace(topics: Mapping[str, str]) -> str:
-    """The namespace of the one ``odom`` (nav_msgs/Odometry) topic among ``topics``."""
-    found = sorted(name[:-len('/odom')] for name, msgtype in topics.items()
-                   if name.endswith('/odom') and msgtype == ODOMETRY.msgtype)
+def find_namespace(topics: Mapping[str, str], relative: str = 'odom',
+                   msgtype: str = ODOMETRY.msgtype) -> str:
+    """The namespace of the one ``relative`` topic of type ``msgtype`` among ``topics``
+    (name -> type); by default the stack's ``odom`` (nav_msgs/Odometry)."""
+    suffix = f'/{relative}'
+    found = sorted(name[:-len(suffix)] for name, kind in topics.items()
+                   if name.endswith(suffix) and kind == msgtype)
     if len(found) == 1:
         return found[0]
     if not found:
-        raise BagError('the bag has no odom topic (nav_msgs/msg/Odometry)')
-    raise BagError(f'the bag has several odom topics ({", ".join(n + "/odom" for n in found)}); '
-                   'pass the namespace')
+        raise BagError(f'the bag has no {relative} topic ({msgtype})')
+    raise BagError(f'the bag has several {relative} topics '
+                   f'({", ".join(n + suffix for n in found)}); pass the namespace')
 
 
 def read_runlog(path: str | Path, *, namespace: str | None = None,
@@ -285,20 +288,20 @@ def read_runlog(path: str | Path, *, namespace: str | None = None,
         'nu': odom.columns['nu'],
     }
     for name in ('tilt_position', 'tilt_velocity', 'thrust'):
-        arrays[name], missing[name] = _exact(ticks, get('joint_states'), name,
+        arrays[name], missing[name] = rows_at(ticks, get('joint_states'), name,
                                              PLANT_FIELDS[name])
 
     wrench_cmd = get('wrench_cmd')
     control = wrench_cmd.stamps if wrench_cmd is not None else np.zeros(0, dtype=np.int64)
     arrays['tc'] = _times(control)
     control_sources: dict[str, tuple[str, str, Callable[..., tuple[FloatArray, int]]]] = {
-        'setpoint_position': ('setpoint', 'position', _as_of),
-        'setpoint_quaternion': ('setpoint', 'quaternion', _as_of),
-        'setpoint_velocity': ('setpoint_velocity', 'velocity', _as_of),
-        'wrench_cmd': ('wrench_cmd', 'wrench', _exact),
-        'thrust_cmd': ('thrust_cmd', 'thrust', _exact),
-        'tilt_cmd': ('tilt_cmd', 'tilt', _exact),
-        'wrench_achieved': ('wrench_achieved', 'wrench', _exact),
+        'setpoint_position': ('setpoint', 'position', rows_as_of),
+        'setpoint_quaternion': ('setpoint', 'quaternion', rows_as_of),
+        'setpoint_velocity': ('setpoint_velocity', 'velocity', rows_as_of),
+        'wrench_cmd': ('wrench_cmd', 'wrench', rows_at),
+        'thrust_cmd': ('thrust_cmd', 'thrust', rows_at),
+        'tilt_cmd': ('tilt_cmd', 'tilt', rows_at),
+        'wrench_achieved': ('wrench_achieved', 'wrench', rows_at),
     }
     for name, (rel, column, join) in control_sources.items():
         if name == 'setpoint_velocity' and names[rel] not in info.topics:

@@ -10,6 +10,11 @@ reliability and durability (see :mod:`.qos`).
 
     tiltrov replay runs/demo/bag --rate 2 --topics odom wrench_cmd \\
         --remap odom:=/replayed/odom --clock --loop
+
+``--through allocator`` replays offline instead, without ROS: the recorded
+``wrench_cmd`` through the allocator in both modes, compared with the recorded
+answers (:mod:`tiltrov_ros.reallocate`); bad input ends with one line on
+stderr and exit code 2, as ``tiltrov analyze``.
 """
 
 from __future__ import annotations
@@ -17,6 +22,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 import time
 from typing import Any
 
@@ -24,6 +30,9 @@ from ..core.errors import BagError
 from .bagfile import BagInfo, RawMessage, bag_info, iter_raw
 from .topics import CLOCK_TOPIC, join_namespace
 
+#: ``--through``: the parts of the stack a bag can be replayed through offline.
+THROUGH = ('allocator',)
+THROUGH_OUT = 'runs/replay'
 _MAX_SLEEP = 0.05  # s: sleep in slices this long so a shutdown is noticed quickly
 # s: after every publisher sees its subscribers, let the subscribers' side finish
 # matching too (DDS matches the two ends separately; a volatile reader drops what
@@ -205,9 +214,65 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--wait-for-subscribers', type=float, default=1.0, metavar='SEC',
                         help='wait up to SEC for every topic to have a subscriber, then '
                              f'{SETTLE} s for the matching to settle (default 1; 0: no wait)')
+    offline = parser.add_argument_group(
+        'offline (no ROS)', 'replay through a part of the stack in this process instead')
+    offline.add_argument('--through', choices=THROUGH, default=None,
+                         help='allocator: re-run the recorded wrench_cmd through the allocator '
+                              '(paper and robust modes) and compare with the recorded '
+                              'thrust_cmd/tilt_cmd')
+    offline.add_argument('--out', type=Path, default=None, metavar='DIR',
+                         help=f'--through: output directory (default: {THROUGH_OUT})')
+    offline.add_argument('--namespace', default=None, metavar='NS',
+                         help="--through: the stack's namespace in the bag (default: the "
+                              "namespace of the bag's one wrench_cmd topic)")
+    offline.add_argument('--no-figures', action='store_true',
+                         help='--through: skip allocation.png')
+
+
+def _through(args: argparse.Namespace) -> int:
+    """``--through allocator``: offline, no rclpy."""
+    import sys
+
+    from ..reallocate import check_options, reallocate, summary_lines
+    from ..simulate import EXIT_BAD_INPUT, EXIT_IO, InputError, one_line
+
+    live = {'--rate': args.rate != 1.0, '--topics': bool(args.topics),
+            '--remap': bool(args.remap), '--clock': args.clock,
+            '--clock-hz': args.clock_hz != 100.0, '--loop': args.loop,
+            '--wait-for-subscribers': args.wait_for_subscribers != 1.0}
+    out = args.out if args.out is not None else Path(THROUGH_OUT)
+    try:
+        check_options(args.through, [name for name, given in live.items() if given])
+        namespace = None if args.namespace is None else (
+            '/' + args.namespace.strip('/') if args.namespace.strip('/') else '')
+        comparison, written = reallocate(args.bag, out, namespace=namespace,
+                                         figure=not args.no_figures)
+    except InputError as exc:
+        print(f'tiltrov replay: error: {exc}', file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except OSError as exc:
+        print(f'tiltrov replay: error: cannot write the results: {one_line(exc)}',
+              file=sys.stderr)
+        return EXIT_IO
+    print(f"{comparison.summary['ticks']} wrench_cmd ticks of {args.bag} through the allocator:")
+    for line in summary_lines(comparison):
+        print(f'  {line}')
+    print(f'wrote {len(written)} files into {out}:')
+    for path in written:
+        print(f'  {path}')
+    return 0
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.through is not None:
+        return _through(args)
+    for name in ('out', 'namespace'):
+        if getattr(args, name) is not None:
+            print(f'tiltrov replay: --{name} needs --through')
+            return 1
+    if args.no_figures:
+        print('tiltrov replay: --no-figures needs --through')
+        return 1
     import rclpy
     from rclpy.executors import ExternalShutdownException
 
