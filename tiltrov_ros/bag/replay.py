@@ -2,7 +2,10 @@
 
 Each message is published as the recorded CDR bytes (raw publishers, nothing
 deserialized), at its log time relative to the first message divided by
-``--rate``, on a fixed wall-clock schedule (no drift). ``/clock`` is only
+``--rate``, on a fixed wall-clock schedule (no drift). ``--by-stamp`` uses the
+header stamps instead (the stamp is read from the CDR bytes): a lockstep run
+outpaces the recorder, whose log times then bunch up, and replayed by log time
+such a bag would arrive in bursts a subscriber's queue cannot hold. ``/clock`` is only
 published with ``--clock``: the bag's own ``/clock`` messages, or, for a bag
 recorded without one, a clock generated from the log times at ``--clock-hz``,
 so nodes with ``use_sim_time`` follow the bag. Publishers offer the recorded
@@ -61,6 +64,7 @@ class ReplayOptions:
     clock: bool = False
     clock_hz: float = 100.0
     loop: bool = False
+    by_stamp: bool = False                # schedule by header stamps, not log times
     wait_for_subscribers: float = 1.0     # s, at most, before the first message
     queue_depth: int = 1000
 
@@ -133,20 +137,41 @@ class Player:
             time.sleep(0.01)
         self._sleep_until(time.monotonic() + SETTLE, should_stop)
 
-    def _schedule(self) -> Iterator[tuple[int, str, bytes | int]]:
-        """(log time, topic, payload) in order; generated clock ticks carry their time."""
+    def _timed(self) -> Iterator[tuple[int, str, bytes]]:
+        """(time, topic, payload) of the recorded messages, in the order to publish them.
+
+        Log times, or with ``by_stamp`` the header stamps (``/clock``: its value;
+        a message without a leading stamp keeps its log time), sorted stably:
+        this holds the replayed messages in memory.
+        """
         messages: Iterator[RawMessage] = iter_raw(self.bag, set(self.topics))
-        if not self.generate_clock:
+        if not self.options.by_stamp:
             for m in messages:
                 yield m.log_time, m.topic, m.data
             return
-        period = round(1e9 / self.options.clock_hz)
-        tick = self.info.start_ns
+        from .cdr import stamp_ns
+
+        timed = []
         for m in messages:
-            while tick <= m.log_time:
+            stamp = stamp_ns(m.data, m.msgtype)
+            timed.append((m.log_time if stamp is None else stamp, m.topic, m.data))
+        timed.sort(key=lambda item: item[0])
+        yield from timed
+
+    def _schedule(self) -> Iterator[tuple[int, str, bytes | int]]:
+        """(time, topic, payload) in order; generated clock ticks carry their time."""
+        if not self.generate_clock:
+            yield from self._timed()
+            return
+        period = round(1e9 / self.options.clock_hz)
+        tick: int | None = None if self.options.by_stamp else self.info.start_ns
+        for time_ns, topic, data in self._timed():
+            if tick is None:
+                tick = time_ns
+            while tick <= time_ns:
                 yield tick, CLOCK_TOPIC, tick
                 tick += period
-            yield m.log_time, m.topic, m.data
+            yield time_ns, topic, data
 
     def run(self, should_stop: Callable[[], bool] = lambda: False) -> dict[str, int]:
         self._wait_for_subscribers(should_stop)
@@ -211,6 +236,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--clock-hz', type=float, default=100.0,
                         help='rate of the generated /clock when the bag has none (default 100)')
     parser.add_argument('--loop', action='store_true', help='start again at the end')
+    parser.add_argument('--by-stamp', action='store_true',
+                        help='publish on the schedule of the header stamps (sim time) instead '
+                             'of the log times: a lockstep bag, whose log times bunch up where '
+                             'the recorder lagged, replays at its simulated pace (holds the '
+                             'replayed messages in memory)')
     parser.add_argument('--wait-for-subscribers', type=float, default=1.0, metavar='SEC',
                         help='wait up to SEC for every topic to have a subscriber, then '
                              f'{SETTLE} s for the matching to settle (default 1; 0: no wait)')
@@ -239,6 +269,7 @@ def _through(args: argparse.Namespace) -> int:
     live = {'--rate': args.rate != 1.0, '--topics': bool(args.topics),
             '--remap': bool(args.remap), '--clock': args.clock,
             '--clock-hz': args.clock_hz != 100.0, '--loop': args.loop,
+            '--by-stamp': args.by_stamp,
             '--wait-for-subscribers': args.wait_for_subscribers != 1.0}
     out = args.out if args.out is not None else Path(THROUGH_OUT)
     try:
@@ -280,6 +311,7 @@ def run(args: argparse.Namespace) -> int:
         options = ReplayOptions(rate=args.rate, topics=args.topics,
                                 remap=parse_remaps(args.remap), clock=args.clock,
                                 clock_hz=args.clock_hz, loop=args.loop,
+                                by_stamp=args.by_stamp,
                                 wait_for_subscribers=args.wait_for_subscribers)
         bag_info(args.bag)  # fail early, before starting ROS, on a bad bag
     except BagError as exc:
