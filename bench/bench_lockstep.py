@@ -9,8 +9,8 @@ Measured in one run, so the ratios hold on any machine:
   one (per executor asked for). It is the plant's own figure: sim time over
   the wall time from its initial state to the end (process start-up and
   discovery excluded; the total wall time of the launch is reported too);
-* the odom -> thrust_cmd latency in realtime mode, separate processes: for
-  each control tick, the time between a probe receiving the ``odom`` stamped
+* the odom -> thrust_cmd latency in realtime mode, separate processes and
+  single process: for each control tick, the time between a probe receiving the ``odom`` stamped
   t_i and the ``thrust_cmd`` stamped t_i (both DDS reception times in the
   probe's process), median and 99th percentile.
 
@@ -24,6 +24,7 @@ numbers as a dict and prints a table.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import re
 import subprocess
@@ -74,8 +75,16 @@ def lockstep(scenario: str, duration: float | None, *, single_process: bool,
     return {'sim': sim, 'wall': wall, 'rtf': rtf, 'total_wall': total}
 
 
-def latency(seconds_of_sim: float, real_time_factor: float) -> dict[str, float]:
-    """odom -> thrust_cmd latency (ms) in realtime mode, separate processes."""
+def latency(seconds_of_sim: float, real_time_factor: float,
+            single_process: bool = False) -> dict[str, float]:
+    """odom -> thrust_cmd latency (ms) in realtime mode.
+
+    Headline: probe reception of ``thrust_cmd`` stamped t_i minus probe
+    reception of ``odom`` stamped t_i. Breakdown from the writers' source
+    timestamps (publish to publish): odom -> wrench_cmd (controller) and
+    wrench_cmd -> thrust_cmd (allocator).
+    """
+    from geometry_msgs.msg import WrenchStamped
     from nav_msgs.msg import Odometry
     import rclpy
     from rclpy.context import Context
@@ -83,48 +92,84 @@ def latency(seconds_of_sim: float, real_time_factor: float) -> dict[str, float]:
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import JointState
 
-    from tiltrov_ros.nodes.common import ODOM, THRUST_CMD, stamp_ns
+    from tiltrov_ros.nodes.common import ODOM, THRUST_CMD, WRENCH_CMD, stamp_ns
 
+    args = ['--scenario', 'pitch_hold', '--realtime', '--real-time-factor',
+            repr(float(real_time_factor)), '--duration', repr(seconds_of_sim),
+            # The plant starts the clock once the controller and this probe read odom.
+            '--param', 'plant_simulator:startup_subscribers:=2']
+    if single_process:
+        args.append('--single-process')
+    # topic -> stamp -> (source timestamp, reception timestamp), ns
+    times: dict[str, dict[int, tuple[int, int]]] = {'odom': {}, 'wrench': {}, 'thrust': {}}
+
+    def keep(kind: str):
+        def callback(msg: Any, info: Any) -> None:
+            times[kind].setdefault(stamp_ns(msg.header.stamp),
+                                   (int(info['source_timestamp']),
+                                    int(info['received_timestamp'])))
+        return callback
+
+    # The probe's participant is created while the nodes start (once the launcher has
+    # started the plant's process): without multicast, participants created far apart
+    # in time find each other only at the next periodic announcement (Fast DDS: 3 s),
+    # see README.md, "Lockstep and realtime".
+    launch = subprocess.Popen(_launch_argv(*args), stdout=subprocess.PIPE,
+                              stderr=subprocess.STDOUT, text=True, cwd=tempfile.gettempdir())
+    lines: list[str] = []
+    assert launch.stdout is not None
+    for line in launch.stdout:
+        lines.append(line)
+        if 'started plant_simulator' in line or '[plant_simulator]' in line:
+            break
     context = Context()
     rclpy.init(context=context)
     node = rclpy.create_node('latency_probe', context=context)
     qos = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_ALL)
-    received: dict[str, dict[int, int]] = {'odom': {}, 'thrust': {}}
-
-    def keep(kind: str):
-        def callback(msg: Any, info: Any) -> None:
-            received[kind].setdefault(stamp_ns(msg.header.stamp),
-                                      int(info['received_timestamp']))
-        return callback
-
-    node.create_subscription(Odometry, ODOM, keep('odom'), qos)
-    node.create_subscription(JointState, THRUST_CMD, keep('thrust'), qos)
+    wrench_sub = node.create_subscription(WrenchStamped, WRENCH_CMD, keep('wrench'), qos)
+    thrust_sub = node.create_subscription(JointState, THRUST_CMD, keep('thrust'), qos)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
-    spinning = threading.Thread(target=executor.spin, daemon=True)
-    spinning.start()
+    reader = threading.Thread(target=lambda: lines.extend(launch.stdout or ()), daemon=True)
+    reader.start()
     try:
-        result = subprocess.run(
-            # The plant starts the clock once the controller and this probe read odom.
-            _launch_argv('--scenario', 'pitch_hold', '--realtime', '--real-time-factor',
-                         repr(float(real_time_factor)), '--duration', repr(seconds_of_sim),
-                         '--param', 'plant_simulator:startup_subscribers:=2'),
-            capture_output=True, text=True, timeout=600, cwd=tempfile.gettempdir())
-        if result.returncode != 0:
-            raise RuntimeError(f'realtime launch failed:\n{result.stdout[-3000:]}')
-        time.sleep(0.2)
+        # The plant starts its clock once two nodes read odom (the controller and
+        # this probe): read odom only once the controller's and the allocator's
+        # writers are matched, so no answer of the run is missed (discovery
+        # without multicast can take seconds).
+        deadline = time.monotonic() + 30.0
+        while (wrench_sub.get_publisher_count() < 1 or thrust_sub.get_publisher_count() < 1):
+            if time.monotonic() > deadline or launch.poll() is not None:
+                raise RuntimeError('the probe never saw the wrench_cmd and thrust_cmd writers')
+            executor.spin_once(timeout_sec=0.05)
+        node.create_subscription(Odometry, ODOM, keep('odom'), qos)
+        while launch.poll() is None:
+            executor.spin_once(timeout_sec=0.05)
+        reader.join(timeout=5.0)
+        output = ''.join(lines)
+        if launch.returncode != 0:
+            raise RuntimeError(f'realtime launch failed:\n{output[-3000:]}')
+        deadline = time.monotonic() + 0.2
+        while time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.02)
     finally:
+        if launch.poll() is None:
+            launch.kill()
+            launch.wait()
         executor.shutdown()
-        spinning.join(timeout=5.0)
         node.destroy_node()
         rclpy.try_shutdown(context=context)
-    odom, thrust = received['odom'], received['thrust']
-    samples = np.array([(thrust[t] - odom[t]) / 1e6 for t in thrust if t in odom])
+    odom, wrench, thrust = times['odom'], times['wrench'], times['thrust']
+    samples = np.array([(thrust[t][1] - odom[t][1]) / 1e6 for t in thrust if t in odom])
     if samples.size == 0:
         raise RuntimeError(f'no odom/thrust_cmd pair was received ({len(odom)} odom, '
                            f'{len(thrust)} thrust_cmd)')
+    controller = [(wrench[t][0] - odom[t][0]) / 1e6 for t in wrench if t in odom]
+    allocator = [(thrust[t][0] - wrench[t][0]) / 1e6 for t in thrust if t in wrench]
     return {'samples': float(samples.size), 'median_ms': float(np.median(samples)),
-            'p99_ms': float(np.percentile(samples, 99)), 'max_ms': float(samples.max())}
+            'p99_ms': float(np.percentile(samples, 99)), 'max_ms': float(samples.max()),
+            'controller_median_ms': float(np.median(controller)) if controller else math.nan,
+            'allocator_median_ms': float(np.median(allocator)) if allocator else math.nan}
 
 
 def main(argv: list[str] | None = None) -> dict[str, float]:
@@ -138,7 +183,9 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     parser.add_argument('--latency-duration', type=float, default=20.0,
                         help='sim seconds of the realtime latency run (default 20)')
     parser.add_argument('--latency-rtf', type=float, default=1.0)
-    parser.add_argument('--skip-latency', action='store_true')
+    parser.add_argument('--latency-runs', default='separate,single',
+                        help='comma-separated: separate (processes), single (process); '
+                             'empty: no latency run')
     args = parser.parse_args(argv)
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
@@ -164,12 +211,19 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     print(f"{'run':<42} {'wall s (launch)':>16} {'RTF':>7} {'/headless':>10}")
     for row in rows:
         print(f'{row[0]:<42} {row[1]:>16} {row[2]:>7} {row[3]:>10}')
-    if not args.skip_latency:
-        lat = latency(args.latency_duration, args.latency_rtf)
-        out.update({f'latency_{k}': v for k, v in lat.items()})
-        print(f"odom -> thrust_cmd, realtime x{args.latency_rtf:g}, separate processes: "
-              f"median {lat['median_ms']:.2f} ms, p99 {lat['p99_ms']:.2f} ms, "
-              f"max {lat['max_ms']:.2f} ms ({lat['samples']:.0f} ticks)")
+    runs_wanted = {r for r in args.latency_runs.split(',') if r}
+    if runs_wanted - {'separate', 'single'}:
+        parser.error(f'--latency-runs: unknown {sorted(runs_wanted - {"separate", "single"})}')
+    for label, single in (('separate processes', False), ('--single-process', True)):
+        if ('single' if single else 'separate') in runs_wanted:
+            lat = latency(args.latency_duration, args.latency_rtf, single_process=single)
+            prefix = 'latency_single_process_' if single else 'latency_'
+            out.update({f'{prefix}{k}': v for k, v in lat.items()})
+            print(f"odom -> thrust_cmd, realtime x{args.latency_rtf:g}, {label}: "
+                  f"median {lat['median_ms']:.2f} ms, p99 {lat['p99_ms']:.2f} ms, "
+                  f"max {lat['max_ms']:.2f} ms ({lat['samples']:.0f} ticks); publish to "
+                  f"publish: controller {lat['controller_median_ms']:.2f} ms, allocator "
+                  f"{lat['allocator_median_ms']:.2f} ms (medians)")
     return out
 
 

@@ -95,17 +95,14 @@ def test_namespaced_config_renames_node_sections(tmp_path: Path) -> None:
     assert list(robot) == ['/**']
 
 
-def test_record_needs_the_recorder(tmp_path: Path) -> None:
+def test_record_starts_the_recorder_first(tmp_path: Path) -> None:
     options = LaunchOptions(duration=1.0, record=tmp_path / 'bag')
-    if launcher.recorder_available():
-        specs, _, _ = stack_specs(options)
-        recorder = specs[0]
-        assert recorder.name == 'bag_recorder' and recorder.overrides_kwarg == 'params'
-        assert recorder.overrides['use_sim_time'] is True
-        assert _spec(specs, 'plant_simulator').overrides['startup_subscribers'] == 2
-    else:
-        with pytest.raises(LaunchError, match='bag_recorder'):
-            stack_specs(options)
+    specs, _, _ = stack_specs(options)
+    recorder = specs[0]
+    assert recorder.name == 'bag_recorder' and recorder.overrides_kwarg == 'params'
+    assert recorder.overrides['use_sim_time'] is True
+    # The plant waits for the recorder too before it starts the run.
+    assert _spec(specs, 'plant_simulator').overrides['startup_subscribers'] == 2
 
 
 # --------------------------------------------------------------------------- processes
@@ -163,27 +160,43 @@ def _alive(pid: int) -> bool:
     return True
 
 
+def _cleanup(process: subprocess.Popen[str], pids: dict[str, int]) -> None:
+    """Whatever a failed test left running: the launcher and the nodes it started."""
+    if process.poll() is None:
+        process.kill()
+        process.wait(timeout=10)
+    for pid in pids.values():
+        if _alive(pid):
+            os.kill(pid, signal.SIGKILL)
+
+
 @pytest.mark.slow
 def test_a_node_dying_mid_run_stops_the_others(tmp_path: Path) -> None:
     process, pids = _start(tmp_path, '--realtime', '--duration', '600')
-    assert set(pids) == set(NODES)
-    os.kill(pids['wrench_controller'], signal.SIGKILL)
-    out, _ = process.communicate(timeout=60)
-    assert process.returncode == 1
-    assert f'wrench_controller died (exit code {-signal.SIGKILL})' in out
-    assert not any(_alive(pid) for pid in pids.values())
+    try:
+        assert set(pids) == set(NODES)
+        os.kill(pids['wrench_controller'], signal.SIGKILL)
+        out, _ = process.communicate(timeout=60)
+        assert process.returncode == 1
+        assert f'wrench_controller died (exit code {-signal.SIGKILL})' in out
+        assert not any(_alive(pid) for pid in pids.values())
+    finally:
+        _cleanup(process, pids)
 
 
 @pytest.mark.slow
 def test_ctrl_c_stops_every_node_cleanly(tmp_path: Path) -> None:
     process, pids = _start(tmp_path, '--realtime', '--duration', '600')
-    time.sleep(0.5)
-    process.send_signal(signal.SIGINT)
-    out, _ = process.communicate(timeout=60)
-    assert process.returncode == 130, out
-    assert 'SIGINT: stopping every node' in out
-    assert 'SIGTERM' not in out and 'SIGKILL' not in out     # SIGINT was enough
-    assert not any(_alive(pid) for pid in pids.values())
+    try:
+        time.sleep(0.5)
+        process.send_signal(signal.SIGINT)
+        out, _ = process.communicate(timeout=60)
+        assert process.returncode == 130, out
+        assert 'SIGINT: stopping every node' in out
+        assert 'SIGTERM' not in out and 'SIGKILL' not in out     # SIGINT was enough
+        assert not any(_alive(pid) for pid in pids.values())
+    finally:
+        _cleanup(process, pids)
 
 
 # --------------------------------------------------------------------------- in process
@@ -212,8 +225,6 @@ def test_single_process_launch_in_a_namespace(ros) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(not launcher.recorder_available(),
-                    reason='the bag_recorder node (branch bags) is not in this tree')
 @pytest.mark.parametrize('single_process', [False, True])
 def test_record_gives_a_bag_equal_to_the_headless_run(tmp_path: Path,
                                                       single_process: bool) -> None:

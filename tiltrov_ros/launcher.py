@@ -26,7 +26,6 @@ from collections.abc import Iterable, Mapping, Sequence
 import contextlib
 from dataclasses import dataclass, field
 import importlib
-import importlib.util
 import json
 import os
 from pathlib import Path
@@ -165,8 +164,9 @@ def stack_specs(options: LaunchOptions, *, config_dir: Path | None = None,
     probe) that the plant should wait for in lockstep.
     """
     config, duration = resolve(options)
-    scenario_param = (config.scenario.source if Path(options.scenario).suffix
-                      else options.scenario) or options.scenario
+    # A name stays a name; a file is passed as an absolute path.
+    scenario_param = (str(Path(options.scenario).resolve()) if Path(options.scenario).suffix
+                      else options.scenario)
 
     def files(node: str) -> tuple[Path, ...]:
         if config_dir is not None:
@@ -230,13 +230,6 @@ def run_info(options: LaunchOptions, config: StackConfig, duration: float) -> di
     return info
 
 
-def recorder_available() -> bool:
-    try:
-        return importlib.util.find_spec(RECORDER_MODULE) is not None
-    except ModuleNotFoundError:
-        return False
-
-
 def recorder_spec(options: LaunchOptions, config: StackConfig, duration: float,
                   raw: Sequence[str] = ()) -> NodeSpec:
     """The ``bag_recorder`` node recording every topic into ``--record DIR``.
@@ -245,9 +238,6 @@ def recorder_spec(options: LaunchOptions, config: StackConfig, duration: float,
     process and as ``-p`` on its command line; it runs on sim time so the bag's
     log times are the stack's.
     """
-    if not recorder_available():
-        raise LaunchError(f'--record needs the bag_recorder node ({RECORDER_MODULE}), '
-                          'which this installation does not have')
     assert options.record is not None
     overrides = {'output': str(Path(options.record).resolve()),
                  'run_info': json.dumps(run_info(options, config, duration), sort_keys=True),
@@ -360,8 +350,12 @@ class _Stop(Exception):
     """Raised by the signal handler to leave the wait loop."""
 
 
-def _stop_children(children: Sequence[_Child], out: _Output) -> None:
-    """SIGINT the stack nodes, then the recorder; escalate to SIGTERM and SIGKILL."""
+def _stop_children(children: Sequence[_Child], out: _Output,
+                   hurry: threading.Event | None = None) -> None:
+    """SIGINT the stack nodes, then the recorder; escalate to SIGTERM and SIGKILL.
+
+    ``hurry`` set (a second Ctrl-C) cuts every wait short.
+    """
     stack = [c for c in children if c.spec.name != RECORDER]
     recorder = [c for c in children if c.spec.name == RECORDER]
     for group, first_timeout in ((stack, STOP_TIMEOUTS[0]),
@@ -378,8 +372,8 @@ def _stop_children(children: Sequence[_Child], out: _Output) -> None:
                 with contextlib.suppress(ProcessLookupError):
                     child.process.send_signal(sig)
             deadline = time.monotonic() + timeout
-            while time.monotonic() < deadline and any(c.process.poll() is None
-                                                      for c in alive):
+            while (time.monotonic() < deadline and not (hurry and hurry.is_set())
+                   and any(c.process.poll() is None for c in alive)):
                 time.sleep(POLL)
     for child in children:
         child.pump.join(timeout=2.0)
@@ -394,7 +388,14 @@ def run_processes(specs: Sequence[NodeSpec], namespace: str, out: _Output,
     children: list[_Child] = []
     previous = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
 
+    stopping = threading.Event()
+    hurry = threading.Event()
+
     def on_signal(signum: int, frame: Any) -> None:
+        if stopping.is_set():       # already stopping: a second Ctrl-C hurries it
+            hurry.set()
+            return
+        stopping.set()
         raise _Stop(signal.Signals(signum).name)
 
     started = time.monotonic()
@@ -433,8 +434,9 @@ def run_processes(specs: Sequence[NodeSpec], namespace: str, out: _Output,
         code = EXIT_INTERRUPTED
         return code
     finally:
+        stopping.set()              # from here on a signal only hurries the stop
         try:
-            _stop_children(children, out)
+            _stop_children(children, out, hurry)
         finally:
             for sig, handler in previous.items():
                 signal.signal(sig, handler)
@@ -486,7 +488,7 @@ def run_single_process(specs: Sequence[NodeSpec], namespace: str, out: _Output,
             side_thread = threading.Thread(target=side.spin, name=RECORDER, daemon=True)
             side_thread.start()
         try:
-            spin_until(executor, context, plant.finished.done)
+            spin_until(executor, context, plant.finished)
         except KeyboardInterrupt:
             out.line('launch', 'SIGINT: stopping every node')
             return EXIT_INTERRUPTED

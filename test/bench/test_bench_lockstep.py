@@ -20,7 +20,8 @@ def test_bench_lockstep_main_returns_its_numbers(capsys: pytest.CaptureFixture[s
     monkeypatch.setitem(sys.modules, 'bench_lockstep', module)
     spec.loader.exec_module(module)
     results = module.main(['--scenario', 'pitch_hold', '--duration', '1.0',
-                           '--latency-duration', '2.0', '--latency-rtf', '2.0'])
+                           '--latency-duration', '2.0', '--latency-rtf', '2.0',
+                           '--latency-runs', 'separate'])
     for key in ('headless_rtf', 'separate_rtf', 'single_process_rtf', 'latency_median_ms',
                 'latency_p99_ms'):
         assert results[key] > 0.0, key

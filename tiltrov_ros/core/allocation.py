@@ -432,8 +432,13 @@ class ThrustAllocator:
         else:
             configs, disc = self._candidates(tau)
             if configs is None:
-                # A family: select with the vectorised twin (hundreds of samples).
-                result_or_none = self._choose_family(tau, prev)
+                # A family: the symmetric one in closed form, else the vectorised
+                # selector (hundreds of samples).
+                symmetric = self._symmetric_family(tau, prev, box)
+                result_or_none = (None if symmetric is None
+                                  else self._choose(tau, symmetric, math.nan, prev, box))
+                if result_or_none is None:
+                    result_or_none = self._choose_family(tau, prev)
                 configs = self._configs_from_batch(tau) if result_or_none is None else []
             else:
                 result_or_none = self._choose(tau, configs, disc, prev, box)
@@ -730,6 +735,53 @@ class ThrustAllocator:
             configs.append(_Config(thrusts, np.array([alpha, beta]), False, (free_f, free_r)))
         return configs, disc
 
+    def _symmetric_family(self, tau: FloatArray, prev: FloatArray | None,
+                          box: FloatArray) -> list[_Config] | None:
+        """The members of family F1 that can be chosen, when Y = K = N = 0.
+
+        Then each pair's two thrusters are alike: (h, z) = (V, Zf)/2 at the front
+        and (H - V, Zr)/2 at the rear, so tan(alpha) = Zf / V,
+        tan(beta) = Zr / (H - V), and the thrusts squared sum to
+        (V^2 + (H - V)^2 + Zf^2 + Zr^2)/2, a convex quadratic in V. Its least
+        value over the V that qualify (a union of intervals bounded by a tilt at
+        an edge of its reach, a thrust at its limit, or a pair without
+        horizontal force) is V = H/2 or one of those bounds: these few members
+        are returned (None when the wrench is not of this kind), for
+        :meth:`_choose` to pick among, as it picks among exact roots.
+        """
+        scale = max(abs(float(v)) for v in tau)
+        if scale == 0.0:
+            return None
+        X, Y, Z, K, M, N = (float(v) / scale for v in tau)
+        Zf, Zr = -0.5 * Z + M / self.length, -0.5 * Z - M / self.length
+        Df, Dr = 0.5 * (SQRT2 * Y + N / self._k), 0.5 * (SQRT2 * Y - N / self._k)
+        kappa, H = 2.0 * K / self.width, SQRT2 * X
+        mag = max(abs(Zf), abs(Zr), abs(Df), abs(Dr), abs(kappa), abs(H))
+        if max(abs(Df), abs(Dr), abs(kappa)) > _FAMILY_RTOL * mag:
+            return None
+        values = {0.5 * H, 0.0, H}
+        limit = 2.0 * self.max_thrust / scale          # |(h, z)| of a pair's thruster, x2
+        for p, (Zp, sign, offset) in enumerate(((Zf, 1.0, 0.0), (Zr, -1.0, H))):
+            tilts = [float(box[p, 0]), float(box[p, 1])]
+            if prev is not None:
+                tilts.append(float(prev[p]))
+            for t in tilts:
+                tan_t = math.tan(t)
+                if abs(tan_t) > 1e-12 and abs(tan_t) < 1e12:
+                    values.add((Zp / tan_t - offset) * sign)     # h_p = Zp / tan(t)
+            if limit > abs(Zp):
+                reach = math.sqrt(limit * limit - Zp * Zp)
+                values.update(((reach - offset) * sign, (-reach - offset) * sign))
+        configs = []
+        for V in sorted(values):
+            f1, f2, alpha, free_f = _pair_scalar(0.5 * Zf, 0.5 * V, 0.5 * Zf, 0.5 * V)
+            f3, f4, beta, free_r = _pair_scalar(0.5 * Zr, 0.5 * (H - V), 0.5 * Zr,
+                                                0.5 * (H - V))
+            with np.errstate(over='ignore'):
+                thrusts = np.array([f1, f2, f3, f4]) * scale
+            configs.append(_Config(thrusts, np.array([alpha, beta]), True, (free_f, free_r)))
+        return configs
+
     def _choose_family(self, tau: FloatArray,
                        prev: FloatArray | None) -> AllocationResult | None:
         """The family member :meth:`_choose` would pick, by the vectorised selector."""
@@ -1014,8 +1066,12 @@ class ThrustAllocator:
         are solved apart, so a few hovering rows do not slow the rest down.
         """
         family = _family_rows(taus, self.length, self.width, self._k)
+        # Symmetric family rows go through allocate() (closed form), so the
+        # batch form answers exactly as single calls do.
+        family &= ~_symmetric_rows(taus, self.length, self.width, self._k)
+        symmetric = _symmetric_rows(taus, self.length, self.width, self._k)
         rows_out, f_out, t_out = [], [], []
-        for subset in (np.flatnonzero(~family), np.flatnonzero(family)):
+        for subset in (np.flatnonzero(~family & ~symmetric), np.flatnonzero(family)):
             if len(subset) == 0:
                 continue
             sub_prev = None if prev is None else prev[subset]
@@ -1201,6 +1257,15 @@ def _classify(tau: FloatArray, length: float, width: float, k: float
     fam2 = small_P & small_Q & small_H
     fam3 = small_k & small_H & (np.abs(P + Q) <= tol2) & ~(small_P & small_Q)
     return (Zf, Zr, Df, Dr, kappa, H, P, Q, mag), (fam1, fam2, fam3), s
+
+
+def _symmetric_rows(tau: FloatArray, length: float, width: float, k: float) -> BoolArray:
+    """Rows of family F1 with Y = K = N = 0 (see ThrustAllocator._symmetric_family)."""
+    (_, _, Df, Dr, kappa, _, _, _, mag), _, _ = _classify(tau, length, width, k)
+    tol = _FAMILY_RTOL * mag
+    out: BoolArray = ((np.abs(Df) <= tol) & (np.abs(Dr) <= tol) & (np.abs(kappa) <= tol)
+                      & (np.max(np.abs(tau), axis=1) > 0))
+    return out
 
 
 def _family_rows(tau: FloatArray, length: float, width: float, k: float) -> BoolArray:

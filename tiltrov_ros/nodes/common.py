@@ -505,11 +505,20 @@ def make_executor(context: Context | None = None, kind: str | None = None) -> Ex
     raise ValueError(f'TILTROV_EXECUTOR={kind!r}; allowed: {", ".join(EXECUTORS)}')
 
 
-def spin_until(executor: Executor, context: Context, done: Callable[[], bool],
-               step: float = 0.1) -> None:
-    """Spin until ``done()`` or the context shuts down (Ctrl-C)."""
-    while context.ok() and not done():
-        executor.spin_once(timeout_sec=step)
+def spin_until(executor: Executor, context: Context, future: Future | None = None,
+               step: float = 0.5) -> None:
+    """Spin until ``future`` is done (None: for ever) or the context shuts down (Ctrl-C).
+
+    The wait is handed to the executor in slices of ``step`` seconds
+    (``spin_until_future_complete``), never event by event from Python: the
+    EventsExecutor then runs its loop in C++ (a ``None`` timeout does not
+    return there when the future completes, hence the slices).
+    """
+    while context.ok() and (future is None or not future.done()):
+        if future is None:
+            executor.spin_once(timeout_sec=step)
+        else:
+            executor.spin_until_future_complete(future, timeout_sec=step)
 
 
 def main_loop(factory: Callable[[], TiltrovNode], args: list[str] | None, name: str, *,
@@ -533,7 +542,9 @@ def main_loop(factory: Callable[[], TiltrovNode], args: list[str] | None, name: 
         executor = make_executor(context)
         executor.add_node(node)
         future = until(node) if until is not None else None
-        spin_until(executor, context, future.done if future is not None else lambda: False)
+        # Not executor.spin(): the EventsExecutor's does not return when Ctrl-C shuts
+        # the context down; spin_until checks the context between slices.
+        spin_until(executor, context, future if future is not None else Future())
         if future is not None and future.done() and before_exit is not None:
             before_exit(node)
     except (KeyboardInterrupt, ExternalShutdownException):

@@ -94,6 +94,9 @@ WATCHDOG_PERIOD = 0.05
 STARTUP_RETRY = 0.25
 #: Most plant steps one realtime timer callback catches up before it re-bases.
 MAX_CATCH_UP = 100
+#: lockstep: most ticks with commands held before their time (only the present one is
+#: legitimate; the cap keeps a misbehaving publisher from growing the table).
+MAX_PENDING = 100
 #: Marks a command that was received for a tick but rejected (held: previous stays).
 _REJECTED: list[float] = []
 
@@ -306,6 +309,8 @@ class PlantSimulator(TiltrovNode):
             return   # a re-published answer to a tick already passed
         entry = self._pending.setdefault(ns, [None, None])
         entry[kind] = values if values is not None else _REJECTED
+        if len(self._pending) > MAX_PENDING:     # commands for ticks far ahead: nonsense
+            del self._pending[max(self._pending)]
         self._advance()
 
     def _command(self, kind: int, values: list[float]) -> None:

@@ -124,6 +124,7 @@ class ThrustAllocatorNode(TiltrovNode):
         self.max_error = 0.0
         self.republished = 0
         self.stale_requests = 0
+        self.dropped = 0
         self.rejected_messages = 0
         self.resets = 0
         self.add_on_set_parameters_callback(self._validate_parameters)
@@ -210,6 +211,8 @@ class ThrustAllocatorNode(TiltrovNode):
         if self._needs_request():
             request = self._requests.get(ns)
             if request is None:
+                if self._waiting is not None:
+                    self.dropped += 1     # a newer wrench came first (realtime)
                 self._waiting = _Waiting(ns, wrench, self.steady_ns())
                 return
             self._allocate(ns, wrench, request)
@@ -327,6 +330,7 @@ class ThrustAllocatorNode(TiltrovNode):
             'saturated': self.saturated, 'max_weighted_error': self.max_error,
             'methods': dict(self.methods), 'republished': self.republished,
             'stale_tilt_requests': self.stale_requests,
+            'dropped_wrenches': self.dropped,
             'rejected_messages': self.rejected_messages, 'resets': self.resets,
             'last_feasible': last.feasible if last is not None else True,
             'tilt_request': self.tilt_request_mode,
