@@ -73,7 +73,7 @@ from numpy.typing import NDArray
 
 from tiltrov_ros.core.allocation import infeasible_rows
 from tiltrov_ros.core.controllers import DOF_NAMES
-from tiltrov_ros.core.kinematics import euler_from_quat, ssa
+from tiltrov_ros.core.kinematics import euler_from_quat_rows, ssa
 from tiltrov_ros.core.runlog import RunLog
 
 FloatArray = NDArray[np.float64]
@@ -122,7 +122,7 @@ class ControlErrors:
 def _euler_rows(quaternions: FloatArray) -> FloatArray:
     if len(quaternions) == 0:
         return np.zeros((0, 3))
-    return np.array([euler_from_quat(q) for q in quaternions])
+    return euler_from_quat_rows(quaternions)
 
 
 def match_ticks(log: RunLog) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
