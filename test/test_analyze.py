@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from tiltrov_ros import cli
-from tiltrov_ros.analyze import analyze, run_labels, unique_names
+from tiltrov_ros.analyze import analyze, bag_names, run_labels, unique_names
 from tiltrov_ros.bag.export import write_runlog_bag
 from tiltrov_ros.bag.writer import BagWriter
 from tiltrov_ros.core.metrics import compute_metrics
@@ -66,14 +66,14 @@ def test_several_bags_each_in_its_folder_with_an_index_and_overlaid_figures(
     bags = [write_runlog_bag(log, tmp_path / kind / 'bag') for kind, log in logs.items()]
     out = tmp_path / 'out'
     result = analyze(bags, out, dpi=40)
-    assert list(result.metrics) == ['bag', 'bag_2', 'bag_3']      # same names: numbered
+    assert list(result.metrics) == ['pd_bag', 'switching_bag', 'pid_bag']
     index = json.loads((out / 'metrics.json').read_text())
     assert index == as_json(result.metrics)
     for name, log in zip(index, logs.values()):
         assert index[name] == as_json(compute_metrics(log))
         assert json.loads((out / name / 'metrics.json').read_text()) == index[name]
         assert (out / name / 'run.npz').is_file() and (out / name / 'control.csv').is_file()
-    assert index['bag_2']['run']['controller'] == 'switching'
+    assert index['switching_bag']['run']['controller'] == 'switching'
     for name in ('errors.png', 'tilts.png', 'tracking.png', 'overlay.png', 'wrench_pd.png',
                  'wrench_switching.png', 'wrench_pid.png'):
         assert out / name in result.written, name
@@ -175,5 +175,15 @@ def test_bad_input_is_one_line_and_exit_code_2(tmp_path: Path,
     assert stdout == '' and not out.exists()       # nothing written
 
 
-def test_unique_names() -> None:
+def test_bag_names_are_unique(tmp_path: Path) -> None:
     assert unique_names(['a', 'b', 'a', 'a', 'a_2']) == ['a', 'b', 'a_2', 'a_3', 'a_2_2']
+    log = headless('pd')
+    a = write_runlog_bag(log, tmp_path / 'runs' / 'pd' / 'bag')
+    b = write_runlog_bag(log, tmp_path / 'runs' / 'pid' / 'bag')
+    c = write_runlog_bag(log, tmp_path / 'other' / 'pd' / 'bag')
+    d = write_runlog_bag(log, tmp_path / 'solo')
+    mcap = next(d.glob('*.mcap'))
+    assert bag_names([a, d]) == ['bag', 'solo']
+    assert bag_names([a, b, a]) == ['pd_bag', 'pid_bag', 'pd_bag_2']
+    assert bag_names([a, c, b]) == ['runs_pd_bag', 'other_pd_bag', 'pid_bag']
+    assert bag_names([mcap]) == ['solo']               # the .mcap of a bag directory

@@ -16,8 +16,9 @@ the RunLog of a headless run: :func:`tiltrov_ros.simulate.write_run`
 of the same scenario give the same ``metrics.json``.
 
 One bag: its files and figures go into ``--out``. Several bags: each bag's
-files go into ``--out/<bag name>/``, ``--out/metrics.json`` maps each bag name
-to its metrics, and the figures, runs overlaid, go into ``--out``. Runs are
+files go into ``--out/<bag name>/`` (see :func:`bag_names`),
+``--out/metrics.json`` maps each bag name to its metrics, and the figures,
+runs overlaid, go into ``--out``. Runs are
 labelled from the bag's ``run_info`` (controller, allocator, and the scenario
 when the bags differ in it), else by the bag's name.
 
@@ -60,13 +61,32 @@ class Recording:
     log: RunLog
 
 
-def bag_name(path: str | Path) -> str:
-    """A bag's name: its directory's name (``runs/pd/bag`` -> ``bag``), or the
-    ``.mcap`` file's stem for a lone MCAP file."""
+def bag_names(paths: Sequence[str | Path]) -> list[str]:
+    """A name for each bag, unique among ``paths``: the bag directory's name
+    (``runs/pd/bag`` -> ``bag``; a lone ``.mcap`` file's stem), with as many
+    parent directories as it takes to tell equal names apart (``runs/pd/bag``
+    and ``runs/pid/bag`` -> ``pd_bag``, ``pid_bag``), and ``_2``, ``_3`` ...
+    for the same bag given twice."""
     from tiltrov_ros.bag.bagfile import resolve
 
-    resolved = resolve(path)
-    return resolved.name if resolved.is_dir() else resolved.stem
+    parts = []
+    for path in paths:
+        resolved = resolve(path)
+        leaf = resolved if resolved.is_dir() else resolved.with_suffix('')
+        parts.append(leaf.absolute().parts)
+    depth = [1] * len(parts)
+
+    def name(i: int) -> str:
+        return '_'.join(p.strip('/') or 'root' for p in parts[i][-depth[i]:])
+
+    while True:
+        names = [name(i) for i in range(len(parts))]
+        clash = [i for i, n in enumerate(names) if depth[i] < len(parts[i]) and any(
+            names[j] == n and parts[j] != parts[i] for j in range(len(parts)))]
+        if not clash:
+            return unique_names(names)
+        for i in clash:
+            depth[i] += 1
 
 
 def unique_names(names: Sequence[str]) -> list[str]:
@@ -178,7 +198,7 @@ def analyze(bags: Sequence[str | Path], out: Path, *, namespace: str | None = No
         raise InputError('no bag given')
     namespace = normalize_namespace(namespace)
     try:
-        names = unique_names([bag_name(bag) for bag in bags])
+        names = bag_names(bags)
     except BagError as exc:
         raise InputError(one_line(exc)) from exc
     recordings = [Recording(name, Path(bag), read_bag(bag, namespace=namespace,

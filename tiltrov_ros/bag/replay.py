@@ -257,6 +257,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                               "namespace of the bag's one wrench_cmd topic)")
     offline.add_argument('--no-figures', action='store_true',
                          help='--through: skip allocation.png')
+    offline.add_argument('--dpi', type=int, default=None,
+                         help='--through: figure resolution (default 100)')
 
 
 def _through(args: argparse.Namespace) -> int:
@@ -277,7 +279,8 @@ def _through(args: argparse.Namespace) -> int:
         namespace = None if args.namespace is None else (
             '/' + args.namespace.strip('/') if args.namespace.strip('/') else '')
         comparison, written = reallocate(args.bag, out, namespace=namespace,
-                                         figure=not args.no_figures)
+                                         figure=not args.no_figures,
+                                         dpi=100 if args.dpi is None else args.dpi)
     except InputError as exc:
         print(f'tiltrov replay: error: {exc}', file=sys.stderr)
         return EXIT_BAD_INPUT
@@ -297,7 +300,7 @@ def _through(args: argparse.Namespace) -> int:
 def run(args: argparse.Namespace) -> int:
     if args.through is not None:
         return _through(args)
-    for name in ('out', 'namespace'):
+    for name in ('out', 'namespace', 'dpi'):
         if getattr(args, name) is not None:
             print(f'tiltrov replay: --{name} needs --through')
             return 1
