@@ -130,8 +130,11 @@ def write_run(log: RunLog, out: Path) -> tuple[list[Path], dict[str, Any]]:
     return paths, metrics
 
 
-def summary_line(metrics: dict[str, Any]) -> str:
-    """Final and RMS errors of one run, in mm and deg, for the terminal."""
+def summary_line(metrics: dict[str, Any], label: str | None = None) -> str:
+    """Final and RMS errors of one run, in mm and deg, for the terminal.
+
+    ``label`` leads the line (default: the run's scenario and controller).
+    """
 
     def fmt(values: dict[str, Any]) -> str:
         pos = ' '.join(f'{1e3 * (values[d] or 0.0):.2f}' for d in DOF_NAMES[:3])
@@ -139,7 +142,9 @@ def summary_line(metrics: dict[str, Any]) -> str:
         return f'{pos} mm, {ang} deg'
 
     run = metrics['run']
-    return (f"{run['scenario']} {run['controller']}: "
+    if label is None:
+        label = f"{run['scenario']} {run['controller']}"
+    return (f'{label}: '
             f"final |e| (x y z, roll pitch yaw) {fmt(metrics['final_error'])}; "
             f"RMS {fmt(metrics['rms_error'])}")
 

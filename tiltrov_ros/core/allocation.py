@@ -200,7 +200,8 @@ class AllocationResult:
 
 @dataclass(frozen=True)
 class BatchResult:
-    """Allocation of many wrenches at once (rows independent)."""
+    """Allocation of many wrenches, one row each (:meth:`ThrustAllocator.allocate_batch`:
+    rows independent; :func:`allocate_sequence`: rows chained through ``previous``)."""
 
     thrusts: FloatArray      # (n, 4) [N]
     tilt_front: FloatArray   # (n,) [rad]
@@ -208,6 +209,36 @@ class BatchResult:
     achieved: FloatArray     # (n, 6)
     feasible: BoolArray      # (n,)
     error: FloatArray        # (n,) weighted wrench error
+
+    @property
+    def tilts(self) -> FloatArray:
+        """(n, 2): (tilt_front, tilt_rear) [rad]."""
+        return np.column_stack([self.tilt_front, self.tilt_rear])
+
+    @classmethod
+    def stack(cls, results: Sequence[AllocationResult]) -> BatchResult:
+        """Rows of single results, in order."""
+        n = len(results)
+        return cls(np.array([r.thrusts for r in results], dtype=float).reshape(n, 4),
+                   np.array([r.tilt_front for r in results], dtype=float),
+                   np.array([r.tilt_rear for r in results], dtype=float),
+                   np.array([r.achieved for r in results], dtype=float).reshape(n, 6),
+                   np.array([r.feasible for r in results], dtype=bool),
+                   np.array([r.error for r in results], dtype=float))
+
+
+def infeasible_rows(requested: ArrayLike, achieved: ArrayLike, max_thrust: float) -> BoolArray:
+    """The allocator's feasibility test, row by row, negated: True where
+    ||achieved - requested|| > FEASIBILITY_RTOL * max(||requested||, max_thrust).
+
+    ``requested`` and ``achieved`` are (n, 6); a row with a NaN is not counted
+    infeasible (a value missing from a recording says nothing either way).
+    """
+    req = np.asarray(requested, dtype=float)
+    miss = np.linalg.norm(np.asarray(achieved, dtype=float) - req, axis=-1)
+    tol = FEASIBILITY_RTOL * np.maximum(np.linalg.norm(req, axis=-1), max_thrust)
+    out: BoolArray = miss > tol
+    return out
 
 
 @dataclass(frozen=True)
@@ -566,11 +597,16 @@ class ThrustAllocator:
             thrusts[i], tilts[i] = res.thrusts, res.tilts
         thrusts[:, ~self._available] = 0.0
         achieved = self.wrench(thrusts, tilts[:, 0], tilts[:, 1])
-        error = np.linalg.norm((achieved - taus) * self.weights, axis=1)
-        tol = FEASIBILITY_RTOL * np.maximum(np.linalg.norm(taus, axis=1), self.max_thrust)
-        feasible = finite & (np.linalg.norm(achieved - taus, axis=1) <= tol)
+        error = self.weighted_error(taus, achieved)
+        feasible = finite & ~infeasible_rows(taus, achieved, self.max_thrust)
         return BatchResult(thrusts, tilts[:, 0].copy(), tilts[:, 1].copy(), achieved,
                            feasible, error)
+
+    def weighted_error(self, requested: ArrayLike, achieved: ArrayLike) -> FloatArray:
+        """||W (achieved - requested)|| row by row ((n, 6) -> (n,)), W = ``weights``."""
+        diff = np.asarray(achieved, dtype=float) - np.asarray(requested, dtype=float)
+        out: FloatArray = np.linalg.norm(diff * self.weights, axis=-1)
+        return out
 
     # ------------------------------------------------------------------ boundaries
 
@@ -1102,6 +1138,38 @@ class ThrustAllocator:
         tol = FEASIBILITY_RTOL * np.maximum(np.linalg.norm(tau, axis=1), self.max_thrust)
         good = np.linalg.norm(achieved - tau, axis=1) <= tol
         return rows[good], f[good], t[good]
+
+
+def allocate_sequence(allocator: ThrustAllocator, wrenches: ArrayLike,
+                      tilt_requests: ArrayLike | None = None, *,
+                      previous: AllocationResult | None = None) -> list[AllocationResult]:
+    """Allocate ``wrenches`` (n, 6) in order, as the ``thrust_allocator`` node does.
+
+    Each call's ``previous`` is the answer to the row before (the first row's is
+    ``previous``), so the tilts move least and within ``max_tilt_step`` along
+    the sequence. ``tilt_requests`` (n, 2), optional: rows with finite values
+    hold the tilts there (:meth:`ThrustAllocator.allocate_fixed`, the switching
+    baseline's tilt request), rows with a NaN are allocated freely.
+    """
+    taus = np.asarray(wrenches, dtype=float)
+    if taus.ndim != 2 or taus.shape[1] != 6:
+        raise AllocationError(f'wrenches must have shape (n, 6), got {taus.shape}')
+    requests = None
+    if tilt_requests is not None:
+        requests = np.asarray(tilt_requests, dtype=float)
+        if requests.shape != (len(taus), 2):
+            raise AllocationError(f'tilt_requests must have shape ({len(taus)}, 2), '
+                                  f'got {requests.shape}')
+    results: list[AllocationResult] = []
+    for i, tau in enumerate(taus):
+        request = None if requests is None else requests[i]
+        if request is not None and bool(np.all(np.isfinite(request))):
+            previous = allocator.allocate_fixed(tau, float(request[0]), float(request[1]),
+                                                previous=previous)
+        else:
+            previous = allocator.allocate(tau, previous=previous)
+        results.append(previous)
+    return results
 
 
 def _norm(v: FloatArray) -> float:
