@@ -11,7 +11,6 @@
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 import subprocess
 import sys
@@ -25,6 +24,7 @@ from tiltrov_ros import cli, launcher
 from tiltrov_ros.bag.bagfile import iter_raw
 from tiltrov_ros.bag.cdr import stamp_ns
 from tiltrov_ros.bag.reader import read_runlog
+from tiltrov_ros.core.metrics import metric_differences
 from tiltrov_ros.core.timebase import to_ns
 from tiltrov_ros.launcher import LaunchOptions
 from tiltrov_ros.reallocate import compare, read_control
@@ -50,19 +50,6 @@ def lockstep_bags(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     return bags
 
 
-def assert_same_metrics(got: Any, expected: Any, path: str = 'metrics') -> None:
-    """Equal keys, equal counts, strings and nulls; floats to 1e-9."""
-    assert type(got) is type(expected), path
-    if isinstance(expected, dict):
-        assert list(got) == list(expected), path
-        for key in expected:
-            assert_same_metrics(got[key], expected[key], f'{path}.{key}')
-    elif isinstance(expected, float):
-        assert math.isclose(got, expected, rel_tol=1e-9, abs_tol=1e-9), (path, got, expected)
-    else:
-        assert got == expected, path
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize('controller', CONTROLLERS)
 def test_analyze_of_a_lockstep_bag_gives_the_metrics_of_tiltrov_sim(
@@ -80,7 +67,7 @@ def test_analyze_of_a_lockstep_bag_gives_the_metrics_of_tiltrov_sim(
     assert analyzed['ticks'] == 100 and analyzed['unmatched_ticks'] == 0
     assert analyzed['run'] == {'scenario': SCENARIO, 'controller': controller,
                                'allocator_mode': 'robust'}
-    assert_same_metrics(analyzed, simulated)
+    assert metric_differences(analyzed, simulated) == []
     # Nothing was missing from the bag: every value came from a message; and every
     # message DDS delivered was read by its CDR layout, none needed rosbags' decoder.
     meta = read_runlog(bag).meta['bag']

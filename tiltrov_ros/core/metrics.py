@@ -287,3 +287,27 @@ def write_metrics(metrics: dict[str, Any], path: str | Path) -> Path:
     target = Path(path)
     target.write_text(json.dumps(metrics, indent=2, allow_nan=False) + '\n', encoding='utf-8')
     return target
+
+
+def metric_differences(got: Any, expected: Any, *, rtol: float = 1e-9, atol: float = 1e-9,
+                       path: str = 'metrics') -> list[str]:
+    """Where two metrics dictionaries differ: one line per difference, empty when equal.
+
+    Keys must match in order; counts, strings and nulls exactly; floats to
+    ``rtol``/``atol`` (as :func:`math.isclose`). ``tiltrov demo`` checks a
+    recorded run against the headless one with it, the tests likewise.
+    """
+    if type(got) is not type(expected):
+        return [f'{path}: {type(got).__name__} {got!r} != {type(expected).__name__} '
+                f'{expected!r}']
+    if isinstance(expected, dict):
+        if list(got) != list(expected):
+            return [f'{path}: keys {list(got)} != {list(expected)}']
+        return [line for key in expected
+                for line in metric_differences(got[key], expected[key], rtol=rtol, atol=atol,
+                                               path=f'{path}.{key}')]
+    if isinstance(expected, float):
+        if not math.isclose(got, expected, rel_tol=rtol, abs_tol=atol):
+            return [f'{path}: {got!r} != {expected!r}']
+        return []
+    return [] if got == expected else [f'{path}: {got!r} != {expected!r}']
