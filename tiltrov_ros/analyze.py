@@ -39,10 +39,10 @@ from tiltrov_ros.core.errors import BagError, TiltrovError
 from tiltrov_ros.core.metrics import write_metrics
 from tiltrov_ros.core.runlog import RunLog
 from tiltrov_ros.simulate import (
-    EXIT_BAD_INPUT,
-    EXIT_IO,
     InputError,
     one_line,
+    print_written,
+    report_errors,
     summary_line,
     write_run,
 )
@@ -232,24 +232,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    try:
+    def task() -> int:
         result = analyze(args.bags, args.out, namespace=args.namespace,
                          figures=not args.no_figures, dpi=args.dpi)
-    except InputError as exc:
-        print(f'tiltrov analyze: error: {exc}', file=sys.stderr)
-        return EXIT_BAD_INPUT
-    except OSError as exc:
-        print(f'tiltrov analyze: error: cannot write the results: {one_line(exc)}',
-              file=sys.stderr)
-        return EXIT_IO
-    for note in result.notes:
-        print(f'tiltrov analyze: note: {note}', file=sys.stderr)
-    for name, values in result.metrics.items():
-        print(summary_line(values, label=name))
-    print(f'wrote {len(result.written)} files into {args.out}:')
-    for path in result.written:
-        print(f'  {path}')
-    return 0
+        for note in result.notes:
+            print(f'tiltrov analyze: note: {note}', file=sys.stderr)
+        for name, values in result.metrics.items():
+            print(summary_line(values, label=name))
+        print_written(result.written, args.out)
+        return 0
+
+    return report_errors('tiltrov analyze', task)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -263,10 +263,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _through(args: argparse.Namespace) -> int:
     """``--through allocator``: offline, no rclpy."""
-    import sys
-
     from ..reallocate import check_options, reallocate, summary_lines
-    from ..simulate import EXIT_BAD_INPUT, EXIT_IO, InputError, one_line
+    from ..simulate import print_written, report_errors
 
     live = {'--rate': args.rate != 1.0, '--topics': bool(args.topics),
             '--remap': bool(args.remap), '--clock': args.clock,
@@ -274,27 +272,22 @@ def _through(args: argparse.Namespace) -> int:
             '--by-stamp': args.by_stamp,
             '--wait-for-subscribers': args.wait_for_subscribers != 1.0}
     out = args.out if args.out is not None else Path(THROUGH_OUT)
-    try:
+
+    def task() -> int:
         check_options(args.through, [name for name, given in live.items() if given])
         namespace = None if args.namespace is None else (
             '/' + args.namespace.strip('/') if args.namespace.strip('/') else '')
         comparison, written = reallocate(args.bag, out, namespace=namespace,
                                          figure=not args.no_figures,
                                          dpi=100 if args.dpi is None else args.dpi)
-    except InputError as exc:
-        print(f'tiltrov replay: error: {exc}', file=sys.stderr)
-        return EXIT_BAD_INPUT
-    except OSError as exc:
-        print(f'tiltrov replay: error: cannot write the results: {one_line(exc)}',
-              file=sys.stderr)
-        return EXIT_IO
-    print(f"{comparison.summary['ticks']} wrench_cmd ticks of {args.bag} through the allocator:")
-    for line in summary_lines(comparison):
-        print(f'  {line}')
-    print(f'wrote {len(written)} files into {out}:')
-    for path in written:
-        print(f'  {path}')
-    return 0
+        print(f"{comparison.summary['ticks']} wrench_cmd ticks of {args.bag} through the "
+              'allocator:')
+        for line in summary_lines(comparison):
+            print(f'  {line}')
+        print_written(written, out)
+        return 0
+
+    return report_errors('tiltrov replay', task)
 
 
 def run(args: argparse.Namespace) -> int:
