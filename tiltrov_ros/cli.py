@@ -31,6 +31,7 @@ COMMANDS: dict[str, Command] = {
                                 'figures'),
     'report': Command('.report', "run the paper's scenarios with every controller; results "
                                  'table and figures into README.md'),
+    'analyze': Command('.analyze', 'metrics.json and figures of recorded runs (bags)'),
     'launch': Command('.launcher', 'start the ROS stack (plant, controller, allocator, '
                                    'reference) for a scenario, lockstep or realtime'),
 }

@@ -14,7 +14,9 @@ its global backend are never touched.
   and attitude error norms, runs overlaid;
 * :func:`wrench_figure` - demanded (``wrench_cmd``) and achieved wrench, six
   panels, one run;
-* :func:`overlay_figure` - eta and eta_d of several runs, six panels.
+* :func:`overlay_figure` - eta and eta_d of several runs, six panels;
+* :func:`allocation_figure` - allocations of the same wrenches compared
+  (``tiltrov replay --through allocator``).
 
 :func:`write_figures` saves them under fixed names (``errors.png``,
 ``tilts.png``, ``tracking.png``, ``overlay.png``, ``wrench_<label>.png``, with
@@ -24,7 +26,7 @@ same runs give the same files.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 import math
 from pathlib import Path
 import re
@@ -34,7 +36,7 @@ from matplotlib.figure import Figure
 import numpy as np
 
 from tiltrov_ros.core.metrics import control_errors
-from tiltrov_ros.core.runlog import RunLog
+from tiltrov_ros.core.runlog import FloatArray, RunLog
 
 CONTROLLER_LABELS = {
     'pd': 'PD (16), proposed',
@@ -71,9 +73,11 @@ def _labels(logs: Sequence[RunLog], labels: Sequence[str] | None) -> list[str]:
     return list(labels)
 
 
-def _title(logs: Sequence[RunLog]) -> str:
-    names = sorted({str(log.meta.get('scenario', '')) for log in logs} - {''})
-    return ', '.join(names)
+def _title(logs: Sequence[RunLog], what: str) -> str:
+    """``'<scenarios>: <what>'``, or ``what`` alone for runs without a scenario (bags
+    recorded without run_info)."""
+    names = sorted({str(log.meta.get('scenario') or '') for log in logs} - {''})
+    return f'{", ".join(names)}: {what}' if names else what
 
 
 def _finish(fig: Figure, axes: Sequence[Axes], title: str, legend: bool = True) -> Figure:
@@ -109,7 +113,7 @@ def errors_figure(logs: Sequence[RunLog], labels: Sequence[str] | None = None) -
         ax.set_title(f'({"abcdef"[k]})', loc='left', fontsize='small')
         if k >= 3:
             ax.set_xlabel('time [s]')
-    return _finish(fig, axes, _title(logs) + ': error eta_d - eta')
+    return _finish(fig, axes, _title(logs, 'error eta_d - eta'))
 
 
 def tilts_figure(logs: Sequence[RunLog], labels: Sequence[str] | None = None) -> Figure:
@@ -130,7 +134,7 @@ def tilts_figure(logs: Sequence[RunLog], labels: Sequence[str] | None = None) ->
         ax.set_ylim(-100, 100)
         ax.set_yticks([-90, -45, 0, 45, 90])
     axes[-1].set_xlabel('time [s]')
-    return _finish(fig, list(axes), _title(logs) + ': tilt angles')
+    return _finish(fig, list(axes), _title(logs, 'tilt angles'))
 
 
 def tracking_figure(logs: Sequence[RunLog], labels: Sequence[str] | None = None) -> Figure:
@@ -160,7 +164,7 @@ def tracking_figure(logs: Sequence[RunLog], labels: Sequence[str] | None = None)
     ax_att.set_xlabel('time [s]')
     ax_att.set_ylabel('attitude error |e_rpy| [deg]')
     ax_att.set_title('(c) orientation error', loc='left', fontsize='small')
-    return _finish(fig, [ax_path, ax_pos, ax_att], _title(logs) + ': tracking')
+    return _finish(fig, [ax_path, ax_pos, ax_att], _title(logs, 'tracking'))
 
 
 def wrench_figure(log: RunLog, label: str | None = None) -> Figure:
@@ -176,7 +180,7 @@ def wrench_figure(log: RunLog, label: str | None = None) -> Figure:
         if k >= 3:
             ax.set_xlabel('time [s]')
     name = label if label is not None else run_label(log)
-    return _finish(fig, axes, f'{_title([log])}: body wrench, {name}')
+    return _finish(fig, axes, _title([log], f'body wrench, {name}'))
 
 
 def overlay_figure(logs: Sequence[RunLog], labels: Sequence[str] | None = None) -> Figure:
@@ -195,7 +199,38 @@ def overlay_figure(logs: Sequence[RunLog], labels: Sequence[str] | None = None) 
         ax.set_ylabel(_STATE_LABELS[k])
         if k >= 3:
             ax.set_xlabel('time [s]')
-    return _finish(fig, axes, _title(logs) + ': pose and reference')
+    return _finish(fig, axes, _title(logs, 'pose and reference'))
+
+
+def allocation_figure(t: FloatArray, weighted_error: Mapping[str, FloatArray],
+                      tilts: Mapping[str, FloatArray], title: str = '') -> Figure:
+    """Allocations of the same wrenches compared (``tiltrov replay --through allocator``).
+
+    (a) the weighted wrench error ||W (achieved - demanded)|| of each over time
+    (symmetric log scale: exact answers sit at 0); (b), (c) the commanded tilts
+    alpha and beta (deg) of each.
+    """
+    fig = Figure(figsize=(11, 7.5))
+    ax_err, ax_front, ax_rear = fig.subplots(3, 1, sharex=True)
+    styles = ('-', '--', ':', '-.')
+    deg = 180 / math.pi
+    for i, (name, error) in enumerate(weighted_error.items()):
+        style = styles[i % len(styles)]
+        ax_err.step(t, error, where='post', linestyle=style, linewidth=1.0, label=name)
+        ax_front.step(t, tilts[name][:, 0] * deg, where='post', linestyle=style, linewidth=1.0,
+                      label=name)
+        ax_rear.step(t, tilts[name][:, 1] * deg, where='post', linestyle=style, linewidth=1.0,
+                     label=name)
+    ax_err.set_yscale('symlog', linthresh=1e-3)
+    ax_err.set_ylabel('weighted wrench error')
+    ax_err.set_title('(a) ||W (achieved - wrench_cmd)||', loc='left', fontsize='small')
+    ax_front.set_ylabel('tilt_front [deg]')
+    ax_front.set_title('(b) front tilt (alpha), commanded', loc='left', fontsize='small')
+    ax_rear.set_ylabel('tilt_rear [deg]')
+    ax_rear.set_title('(c) rear tilt (beta), commanded', loc='left', fontsize='small')
+    ax_rear.set_xlabel('time [s]')
+    heading = 'allocation of the recorded wrench_cmd'
+    return _finish(fig, [ax_err, ax_front, ax_rear], f'{title}: {heading}' if title else heading)
 
 
 def _slug(text: str) -> str:
@@ -216,7 +251,8 @@ def write_figures(logs: Sequence[RunLog], out_dir: str | Path, *, prefix: str = 
 
     Names: ``<prefix>errors.png``, ``<prefix>tilts.png``, ``<prefix>tracking.png``,
     ``<prefix>overlay.png`` and one ``<prefix>wrench_<controller>.png`` per run
-    (``_2``, ``_3`` ... when two runs share a controller).
+    (its label for a run without a controller in its meta; ``_2``, ``_3`` ...
+    when two runs share a controller).
     """
     unknown = set(which) - set(FIGURES)
     if unknown:
@@ -235,7 +271,7 @@ def write_figures(logs: Sequence[RunLog], out_dir: str | Path, *, prefix: str = 
         if key == 'wrench':
             seen: dict[str, int] = {}
             for log, name in zip(logs, names):
-                stem = _slug(str(log.meta.get('controller', 'run')))
+                stem = _slug(str(log.meta.get('controller') or name))
                 seen[stem] = seen.get(stem, 0) + 1
                 suffix = '' if seen[stem] == 1 else f'_{seen[stem]}'
                 written.append(save(wrench_figure(log, name),

@@ -20,7 +20,7 @@ one line on stderr and exit code 2.
 from __future__ import annotations
 
 import argparse
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 import sys
 from typing import Any
@@ -130,8 +130,11 @@ def write_run(log: RunLog, out: Path) -> tuple[list[Path], dict[str, Any]]:
     return paths, metrics
 
 
-def summary_line(metrics: dict[str, Any]) -> str:
-    """Final and RMS errors of one run, in mm and deg, for the terminal."""
+def summary_line(metrics: dict[str, Any], label: str | None = None) -> str:
+    """Final and RMS errors of one run, in mm and deg, for the terminal.
+
+    ``label`` leads the line (default: the run's scenario and controller).
+    """
 
     def fmt(values: dict[str, Any]) -> str:
         pos = ' '.join(f'{1e3 * (values[d] or 0.0):.2f}' for d in DOF_NAMES[:3])
@@ -139,7 +142,9 @@ def summary_line(metrics: dict[str, Any]) -> str:
         return f'{pos} mm, {ang} deg'
 
     run = metrics['run']
-    return (f"{run['scenario']} {run['controller']}: "
+    if label is None:
+        label = f"{run['scenario']} {run['controller']}"
+    return (f'{label}: '
             f"final |e| (x y z, roll pitch yaw) {fmt(metrics['final_error'])}; "
             f"RMS {fmt(metrics['rms_error'])}")
 
@@ -172,20 +177,33 @@ def _run(args: argparse.Namespace) -> list[Path]:
     return written
 
 
-def run(args: argparse.Namespace) -> int:
+def report_errors(prog: str, task: Callable[[], int]) -> int:
+    """``task()``'s exit code; bad input (:class:`InputError`) one line on stderr and
+    exit 2, a file that cannot be written one line and exit 1. ``tiltrov sim``,
+    ``analyze`` and ``replay --through`` report alike with it."""
     try:
-        written = _run(args)
+        return task()
     except InputError as exc:
-        print(f'tiltrov sim: error: {exc}', file=sys.stderr)
+        print(f'{prog}: error: {exc}', file=sys.stderr)
         return EXIT_BAD_INPUT
     except OSError as exc:
-        print(f'tiltrov sim: error: cannot write the results: {one_line(exc)}',
-              file=sys.stderr)
+        print(f'{prog}: error: cannot write the results: {one_line(exc)}', file=sys.stderr)
         return EXIT_IO
-    print(f'wrote {len(written)} files into {args.out}:')
+
+
+def print_written(written: Sequence[Path], out: Path) -> None:
+    """The files a command wrote, one per line."""
+    print(f'wrote {len(written)} files into {out}:')
     for path in written:
         print(f'  {path}')
-    return 0
+
+
+def run(args: argparse.Namespace) -> int:
+    def task() -> int:
+        print_written(_run(args), args.out)
+        return 0
+
+    return report_errors('tiltrov sim', task)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

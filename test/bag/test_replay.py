@@ -171,3 +171,50 @@ def test_bad_options_are_bag_errors(tmp_path: Path) -> None:
 
     with pytest.raises(BagError, match='/nope'):
         Player(str(tmp_path / 'bag'), NoNode(), ReplayOptions(topics=['nope']))
+
+
+def _bunched_bag(path: Path, *, with_clock: bool = True) -> Path:
+    """wrench_cmd stamped 0, 50, 100 ms and /clock 0, 10, 20 ms, all logged at START (a
+    recorder that lagged), and a message without a stamp logged at 25 ms."""
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    string = store.serialize_cdr(store.types['std_msgs/msg/String'](data='x'),
+                                 'std_msgs/msg/String')
+    with BagWriter(path) as bag:
+        wrench = bag.add_topic('/wrench_cmd', TYPES['/wrench_cmd'])
+        note = bag.add_topic('/note', 'std_msgs/msg/String')
+        for k in (2, 0, 1):             # STACK's wrench k is stamped k * 50 ms
+            data = canonical(serialize_message(MAKERS['/wrench_cmd'](k)), TYPES['/wrench_cmd'])
+            bag.write(wrench, START, data)
+        if with_clock:
+            clock = bag.add_topic('/clock', TYPES['/clock'])
+            for k in range(3):          # STACK's clock k is k * 10 ms
+                bag.write(clock, START, canonical(serialize_message(MAKERS['/clock'](k)),
+                                                  TYPES['/clock']))
+        bag.write(note, 25_000_000, string)
+    return path
+
+
+def test_by_stamp_schedules_the_header_stamps(ros: Any, tmp_path: Path) -> None:
+    """A lockstep bag: the recorder lagged, so the log times bunch up; --by-stamp
+    replays at the stamps (the clock's value for /clock; log time without a stamp)."""
+    bag = str(_bunched_bag(tmp_path / 'bag'))
+    node = ros.node('player')
+    by_log = Player(bag, node, ReplayOptions(topics=['wrench_cmd', 'note']))
+    assert [(t, topic) for t, topic, _ in by_log._schedule()] == [
+        (25_000_000, '/note'), (START, '/wrench_cmd'), (START, '/wrench_cmd'),
+        (START, '/wrench_cmd')]
+    player = Player(bag, node, ReplayOptions(topics=['wrench_cmd', 'note'], clock=True,
+                                             by_stamp=True))
+    assert [(t, topic) for t, topic, _ in player._schedule()] == [
+        (0, '/wrench_cmd'), (0, '/clock'), (10_000_000, '/clock'), (20_000_000, '/clock'),
+        (25_000_000, '/note'), (50_000_000, '/wrench_cmd'), (100_000_000, '/wrench_cmd')]
+    # A clock generated for a bag without one follows the stamps too.
+    bag = str(_bunched_bag(tmp_path / 'no_clock', with_clock=False))
+    player = Player(bag, node, ReplayOptions(topics=['wrench_cmd'], by_stamp=True,
+                                             clock=True, clock_hz=40.0))
+    assert [(t, topic) for t, topic, _ in player._schedule()] == [
+        (0, '/clock'), (0, '/wrench_cmd'), (25_000_000, '/clock'), (50_000_000, '/clock'),
+        (50_000_000, '/wrench_cmd'), (75_000_000, '/clock'), (100_000_000, '/clock'),
+        (100_000_000, '/wrench_cmd')]

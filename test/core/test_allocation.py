@@ -585,3 +585,66 @@ def test_invalid_allocator_config_names_the_parameter(values: dict, name: str) -
 
     with pytest.raises(ParameterError, match=name):
         AllocatorConfig.from_mapping(values, source='thrust_allocator.yaml')
+
+
+# --------------------------------------------------------------------------- sequences
+
+
+@pytest.mark.parametrize('mode', MODES)
+def test_allocate_sequence_chains_previous_like_the_node(mode: str) -> None:
+    from tiltrov_ros.core.allocation import BatchResult, allocate_sequence
+
+    rng = np.random.default_rng(7)
+    taus = _attainable(rng, 12)
+    alloc = ThrustAllocator(L, D, FMAX, max_tilt_step=math.radians(7.5), mode=mode)
+    results = allocate_sequence(alloc, taus)
+    previous = None
+    for tau, result in zip(taus, results):
+        expected = alloc.allocate(tau, previous=previous)
+        np.testing.assert_array_equal(result.thrusts, expected.thrusts)
+        assert (result.tilt_front, result.tilt_rear) == (expected.tilt_front,
+                                                          expected.tilt_rear)
+        previous = expected
+    # Chaining matters here: each tilt moves at most one servo reach per row,
+    # which independent allocations do not respect.
+    steps = np.abs(np.diff(BatchResult.stack(results).tilts, axis=0))
+    assert np.all(steps <= math.radians(7.5) + 1e-12)
+    independent = alloc.allocate_batch(taus)
+    assert np.max(np.abs(np.diff(independent.tilts, axis=0))) > math.radians(7.5)
+
+    batch = BatchResult.stack(results)
+    assert batch.thrusts.shape == (12, 4) and batch.achieved.shape == (12, 6)
+    np.testing.assert_array_equal(batch.error, [r.error for r in results])
+    np.testing.assert_array_equal(batch.feasible, [r.feasible for r in results])
+
+
+def test_allocate_sequence_holds_requested_tilts() -> None:
+    from tiltrov_ros.core.allocation import allocate_sequence
+
+    taus = np.array([[10.0, 0, -20, 0, 1, 0]] * 3)
+    requests = np.array([[0.0, 0.0], [math.nan, math.nan], [HALF_PI, HALF_PI]])
+    alloc = ThrustAllocator(L, D, FMAX, mode='robust')
+    first, free, fixed = allocate_sequence(alloc, taus, requests)
+    assert first.method == 'fixed_tilt' and (first.tilt_front, first.tilt_rear) == (0.0, 0.0)
+    assert free.method != 'fixed_tilt'
+    expected = alloc.allocate_fixed(taus[2], HALF_PI, HALF_PI, previous=free)
+    assert fixed.method == 'fixed_tilt'
+    np.testing.assert_array_equal(fixed.thrusts, expected.thrusts)
+    with pytest.raises(AllocationError, match='tilt_requests'):
+        allocate_sequence(alloc, taus, requests[:2])
+    with pytest.raises(AllocationError, match='wrenches'):
+        allocate_sequence(alloc, taus[:, :5])
+
+
+def test_infeasible_rows_is_the_allocators_own_test() -> None:
+    from tiltrov_ros.core.allocation import FEASIBILITY_RTOL, infeasible_rows
+
+    req = np.array([[0.0, 0, 0, 0, 0, 0], [100.0, 0, 0, 0, 0, 0], [1.0, 0, 0, 0, 0, 0]])
+    tol = FEASIBILITY_RTOL * np.array([FMAX, 100.0, FMAX])
+    ach = req.copy()
+    ach[:, 1] = 0.9 * tol
+    assert not infeasible_rows(req, ach, FMAX).any()
+    ach[:, 1] = 1.1 * tol
+    assert infeasible_rows(req, ach, FMAX).all()
+    ach[0, 2] = math.nan
+    assert not infeasible_rows(req, ach, FMAX)[0]      # unknown: not counted

@@ -183,3 +183,17 @@ def test_ssa_random_angles() -> None:
     # Already in range: unchanged, bit for bit.
     assert np.array_equal(ssa(base), base)
     assert ssa(1e-300) == 1e-300
+
+
+def test_euler_from_quat_rows_is_euler_from_quat_row_by_row() -> None:
+    from tiltrov_ros.core.kinematics import euler_from_quat_rows
+
+    rng = np.random.default_rng(11)
+    q = rng.normal(size=(2000, 4))                   # any norm: R is that of q / |q|
+    q[:5] = [quat_from_euler(0.3, math.pi / 2, -1.0), quat_from_euler(0.3, -math.pi / 2, 2.0),
+             [1.0, 0, 0, 0], [0, 0, 0, 1.0], [0, 1.0, 0, 0]]   # gimbal lock, identity, flips
+    expected = np.array([euler_from_quat(row) for row in q])
+    got = euler_from_quat_rows(q)
+    assert got.shape == (2000, 3)
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12)
+    assert euler_from_quat_rows(np.zeros((0, 4))).shape == (0, 3)

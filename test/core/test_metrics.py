@@ -15,6 +15,7 @@ from tiltrov_ros.core.metrics import (
     SETTLING_FLOOR,
     compute_metrics,
     control_errors,
+    metric_differences,
     write_metrics,
 )
 from tiltrov_ros.core.runlog import RunLog
@@ -231,3 +232,17 @@ def test_errors_are_those_the_controller_saw_and_npz_round_trip_agrees(tmp_path:
     # A RunLog read back (as tiltrov analyze reads one from a bag) gives the same numbers.
     log.save_npz(tmp_path / 'run.npz')
     assert compute_metrics(RunLog.load_npz(tmp_path / 'run.npz')) == m
+
+
+def test_metric_differences_names_each_difference_and_nothing_else() -> None:
+    base = {'ticks': 10, 'run': {'controller': 'pd'}, 'rms_error': {'x': 0.5, 'y': None}}
+    assert metric_differences(base, json.loads(json.dumps(base))) == []
+    near = {'ticks': 10, 'run': {'controller': 'pd'}, 'rms_error': {'x': 0.5 + 1e-12, 'y': None}}
+    assert metric_differences(near, base) == []
+    far = {'ticks': 11, 'run': {'controller': 'pid'}, 'rms_error': {'x': 0.6, 'y': 0.0}}
+    assert metric_differences(far, base) == [
+        'metrics.ticks: 11 != 10', "metrics.run.controller: 'pid' != 'pd'",
+        'metrics.rms_error.x: 0.6 != 0.5', 'metrics.rms_error.y: float 0.0 != NoneType None']
+    assert metric_differences({'b': 1, 'a': 2}, {'a': 2, 'b': 1}) == [
+        "metrics: keys ['b', 'a'] != ['a', 'b']"]
+    assert metric_differences({'x': 0.6}, {'x': 0.5}, rtol=0.25) == []

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from functools import cache
 import math
 from pathlib import Path
 from typing import Any
@@ -42,6 +43,7 @@ from ..core.errors import BagError
 from ..core.runlog import CONTROL_FIELDS, PLANT_FIELDS, FloatArray, RunLog
 from ..core.timebase import seconds, stamp_to_ns
 from ..progress import ProgressBar
+from . import cdr
 from .bagfile import bag_info, open_reader
 from .msgdefs import typestore
 from .topics import join_namespace
@@ -53,72 +55,92 @@ TILTS = ('tilt_front', 'tilt_rear')
 Row = Sequence[float]
 
 
+Paths = Sequence[str | None]
+
+
 @dataclass(frozen=True)
 class Decoder:
-    """How to turn one message type into a row of named float columns."""
+    """How to turn one message type into a row of named float columns.
+
+    ``paths(msg)`` names, for a decoded message, the field holding each value
+    of the row (``pose.pose.position.x``, ``effort[3]``; None: NaN, e.g. a joint
+    the message does not list). The reader applies it to one message of each
+    layout and reads whole batches at those fields (:mod:`.cdr`).
+    """
 
     msgtype: str
     columns: dict[str, int]             # column name -> width
-    extract: Callable[[Any], Row]       # decoded message -> flat row
+    paths: Callable[[Any], Paths]       # decoded message -> field path of each value
 
     @property
     def width(self) -> int:
         return sum(self.columns.values())
 
-
-def _vec(v: Any) -> tuple[float, float, float]:
-    return (v.x, v.y, v.z)
-
-
-def _quat_wxyz(q: Any) -> tuple[float, float, float, float]:
-    return (q.w, q.x, q.y, q.z)
+    def extract(self, msg: Any) -> Row:
+        """The row of one decoded message."""
+        return [NAN if path is None else float(_follow(msg, path)) for path in self.paths(msg)]
 
 
-def _odometry(m: Any) -> Row:
-    pose, twist = m.pose.pose, m.twist.twist
-    return (*_vec(pose.position), *_quat_wxyz(pose.orientation),
-            *_vec(twist.linear), *_vec(twist.angular))
+@cache
+def _steps(path: str) -> tuple[str | int, ...]:
+    steps: list[str | int] = []
+    for part in path.split('.'):
+        name, _, index = part.partition('[')
+        steps.append(name)
+        if index:
+            steps.append(int(index.rstrip(']')))
+    return tuple(steps)
 
 
-def _joint_values(m: Any, names: Sequence[str], attribute: str) -> list[float]:
-    """Values of ``attribute`` (position/velocity/effort) of joints ``names``, NaN if absent."""
+def _follow(msg: Any, path: str) -> Any:
+    value = msg
+    for step in _steps(path):
+        value = value[step] if isinstance(step, int) else getattr(value, step)
+    return value
+
+
+def _fixed(*paths: str) -> Callable[[Any], Paths]:
+    return lambda msg: paths
+
+
+def _vector(prefix: str) -> tuple[str, str, str]:
+    return (f'{prefix}.x', f'{prefix}.y', f'{prefix}.z')
+
+
+def _quaternion_wxyz(prefix: str) -> tuple[str, str, str, str]:
+    return (f'{prefix}.w', f'{prefix}.x', f'{prefix}.y', f'{prefix}.z')
+
+
+def _joint_paths(m: Any, names: Sequence[str], attribute: str) -> list[str | None]:
+    """Paths of ``attribute`` (position/velocity/effort) of joints ``names``; None if absent."""
     index = {name: i for i, name in enumerate(m.name)}
-    values = getattr(m, attribute)
-    out = []
+    size = len(getattr(m, attribute))
+    out: list[str | None] = []
     for name in names:
         i = index.get(name)
-        out.append(float(values[i]) if i is not None and i < len(values) else NAN)
+        out.append(f'{attribute}[{i}]' if i is not None and i < size else None)
     return out
 
 
-def _plant_joints(m: Any) -> Row:
-    return (_joint_values(m, TILTS, 'position') + _joint_values(m, TILTS, 'velocity')
-            + _joint_values(m, THRUSTERS, 'effort'))
+def _joints(*parts: tuple[Sequence[str], str]) -> Callable[[Any], Paths]:
+    return lambda m: [p for names, attribute in parts for p in _joint_paths(m, names, attribute)]
 
 
-def _pose(m: Any) -> Row:
-    return (*_vec(m.pose.position), *_quat_wxyz(m.pose.orientation))
-
-
-def _twist(m: Any) -> Row:
-    return (*_vec(m.twist.linear), *_vec(m.twist.angular))
-
-
-def _wrench(m: Any) -> Row:
-    return (*_vec(m.wrench.force), *_vec(m.wrench.torque))
-
-
-ODOMETRY = Decoder('nav_msgs/msg/Odometry', {'position': 3, 'quaternion': 4, 'nu': 6},
-                   _odometry)
+ODOMETRY = Decoder('nav_msgs/msg/Odometry', {'position': 3, 'quaternion': 4, 'nu': 6}, _fixed(
+    *_vector('pose.pose.position'), *_quaternion_wxyz('pose.pose.orientation'),
+    *_vector('twist.twist.linear'), *_vector('twist.twist.angular')))
 PLANT_JOINTS = Decoder('sensor_msgs/msg/JointState',
-                       {'tilt_position': 2, 'tilt_velocity': 2, 'thrust': 4}, _plant_joints)
-SETPOINT = Decoder('geometry_msgs/msg/PoseStamped', {'position': 3, 'quaternion': 4}, _pose)
-SETPOINT_VELOCITY = Decoder('geometry_msgs/msg/TwistStamped', {'velocity': 6}, _twist)
-WRENCH = Decoder('geometry_msgs/msg/WrenchStamped', {'wrench': 6}, _wrench)
+                       {'tilt_position': 2, 'tilt_velocity': 2, 'thrust': 4},
+                       _joints((TILTS, 'position'), (TILTS, 'velocity'), (THRUSTERS, 'effort')))
+SETPOINT = Decoder('geometry_msgs/msg/PoseStamped', {'position': 3, 'quaternion': 4}, _fixed(
+    *_vector('pose.position'), *_quaternion_wxyz('pose.orientation')))
+SETPOINT_VELOCITY = Decoder('geometry_msgs/msg/TwistStamped', {'velocity': 6}, _fixed(
+    *_vector('twist.linear'), *_vector('twist.angular')))
+WRENCH = Decoder('geometry_msgs/msg/WrenchStamped', {'wrench': 6}, _fixed(
+    *_vector('wrench.force'), *_vector('wrench.torque')))
 THRUST_CMD = Decoder('sensor_msgs/msg/JointState', {'thrust': 4},
-                     lambda m: _joint_values(m, THRUSTERS, 'effort'))
-TILT_CMD = Decoder('sensor_msgs/msg/JointState', {'tilt': 2},
-                   lambda m: _joint_values(m, TILTS, 'position'))
+                     _joints((THRUSTERS, 'effort')))
+TILT_CMD = Decoder('sensor_msgs/msg/JointState', {'tilt': 2}, _joints((TILTS, 'position')))
 
 # relative topic name -> decoder, for the RunLog
 RUNLOG_TOPICS: dict[str, Decoder] = {
@@ -142,29 +164,131 @@ class Series:
     log_times: NDArray[np.int64]        # log times, ns
     columns: dict[str, FloatArray]      # name -> (n,) or (n, width)
     duplicates: int = 0                 # messages dropped for a repeated stamp
+    one_by_one: int = 0                 # messages deserialized singly (not by layout)
 
     def __len__(self) -> int:
         return len(self.stamps)
 
 
-def _series(topic: str, decoder: Decoder, stamps: list[int], log_times: list[int],
-            rows: list[Row]) -> Series:
-    stamp_arr = np.asarray(stamps, dtype=np.int64)
-    log_arr = np.asarray(log_times, dtype=np.int64)
-    table = np.asarray(rows, dtype=float).reshape(len(rows), decoder.width)
-    order = np.argsort(stamp_arr, kind='stable')
-    stamp_arr, log_arr, table = stamp_arr[order], log_arr[order], table[order]
-    # keep the last message of each stamp (in recording order)
-    keep = np.ones(len(stamp_arr), dtype=bool)
-    keep[:-1] = stamp_arr[1:] != stamp_arr[:-1]
-    duplicates = int(len(keep) - keep.sum())
-    stamp_arr, log_arr, table = stamp_arr[keep], log_arr[keep], table[keep]
-    columns: dict[str, FloatArray] = {}
-    start = 0
-    for name, width in decoder.columns.items():
-        columns[name] = table[:, start:start + width]
-        start += width
-    return Series(topic, stamp_arr, log_arr, columns, duplicates)
+#: Messages of one topic decoded together (bounds the memory a read holds).
+BATCH = 16384
+#: Layouts tried on one batch before its remaining messages are decoded one by one.
+MAX_LAYOUTS = 8
+
+
+class _TopicBatches:
+    """The messages of one topic, decoded in batches of :data:`BATCH`.
+
+    A batch is decoded layout by layout (:func:`.cdr.walk` of its first
+    undecoded message): the messages with that layout's size and structure bytes
+    are read with numpy at the decoder's paths. Each layout is checked first
+    against rosbags' decoding of the message it came from (stamp and every
+    value, to the bit); a message whose layout cannot be walked or fails the
+    check, and what remains after :data:`MAX_LAYOUTS` layouts, goes through
+    rosbags' deserializer one by one. Both ways give the same floats.
+    """
+
+    def __init__(self, topic: str, decoder: Decoder) -> None:
+        self.topic = topic
+        self.decoder = decoder
+        self.store = typestore()
+        self.payloads: list[bytes] = []
+        self.log_times: list[int] = []
+        self.stamp_parts: list[NDArray[np.int64]] = []
+        self.log_parts: list[NDArray[np.int64]] = []
+        self.row_parts: list[FloatArray] = []
+        self.fast = 0                   # messages read through a layout
+        self.slow = 0                   # messages deserialized one by one
+
+    def add(self, data: bytes, log_time: int) -> None:
+        self.payloads.append(data)
+        self.log_times.append(log_time)
+        if len(self.payloads) >= BATCH:
+            self.flush()
+
+    def flush(self) -> None:
+        payloads, self.payloads = self.payloads, []
+        if not payloads:
+            return
+        n = len(payloads)
+        stamps = np.zeros(n, dtype=np.int64)
+        rows = np.full((n, self.decoder.width), NAN)
+        sizes = np.fromiter((len(p) for p in payloads), dtype=np.int64, count=n)
+        for size in np.unique(sizes):
+            remaining = np.flatnonzero(sizes == size)
+            for _ in range(MAX_LAYOUTS):
+                if not remaining.size:
+                    break
+                layout_paths = self._layout(payloads[remaining[0]])
+                if layout_paths is None:
+                    self._slow(payloads, remaining[:1], stamps, rows)
+                    remaining = remaining[1:]
+                    continue
+                layout, paths = layout_paths
+                buffer = b''.join(payloads[i] for i in remaining)
+                same = cdr.same_structure(buffer, len(remaining), layout)
+                chosen = remaining[same]
+                if not same.all():
+                    buffer = b''.join(payloads[i] for i in chosen)
+                stamps[chosen] = cdr.read_stamps(buffer, len(chosen), layout)
+                rows[chosen] = cdr.read_leaves(buffer, len(chosen), layout, paths)
+                self.fast += len(chosen)
+                remaining = remaining[~same]
+            self._slow(payloads, remaining, stamps, rows)
+        self.stamp_parts.append(stamps)
+        self.row_parts.append(rows)
+        self.log_parts.append(np.asarray(self.log_times, dtype=np.int64))
+        self.log_times = []
+
+    def _layout(self, data: bytes) -> tuple[cdr.Layout, Paths] | None:
+        """The layout of ``data`` and the decoder's paths in it, checked against
+        rosbags' decoding of ``data``; None when it cannot be used."""
+        try:
+            layout = cdr.walk(data, self.decoder.msgtype)
+        except cdr.LayoutError:
+            return None
+        msg: Any = self.store.deserialize_cdr(data, self.decoder.msgtype)
+        paths = list(self.decoder.paths(msg))
+        if any(p is not None and p not in layout.leaves for p in paths):
+            return None
+        expected_row = np.array(self.decoder.extract(msg), dtype=float)
+        expected_stamp = stamp_to_ns(msg.header.stamp.sec, msg.header.stamp.nanosec)
+        row = cdr.read_leaves(data, 1, layout, paths)[0]
+        stamp = int(cdr.read_stamps(data, 1, layout)[0])
+        if stamp != expected_stamp or row.tobytes() != expected_row.tobytes():
+            return None
+        return layout, paths
+
+    def _slow(self, payloads: list[bytes], indices: NDArray[np.intp],
+              stamps: NDArray[np.int64], rows: FloatArray) -> None:
+        for i in indices:
+            msg: Any = self.store.deserialize_cdr(payloads[i], self.decoder.msgtype)
+            stamps[i] = stamp_to_ns(msg.header.stamp.sec, msg.header.stamp.nanosec)
+            rows[i] = self.decoder.extract(msg)
+        self.slow += len(indices)
+
+    def series(self) -> Series:
+        """Every message added, sorted by stamp, the last of each stamp kept."""
+        self.flush()
+        width = self.decoder.width
+        stamp_arr = np.concatenate(self.stamp_parts) if self.stamp_parts else np.zeros(
+            0, dtype=np.int64)
+        log_arr = np.concatenate(self.log_parts) if self.log_parts else np.zeros(
+            0, dtype=np.int64)
+        table = np.concatenate(self.row_parts) if self.row_parts else np.zeros((0, width))
+        order = np.argsort(stamp_arr, kind='stable')
+        stamp_arr, log_arr, table = stamp_arr[order], log_arr[order], table[order]
+        # keep the last message of each stamp (in recording order)
+        keep = np.ones(len(stamp_arr), dtype=bool)
+        keep[:-1] = stamp_arr[1:] != stamp_arr[:-1]
+        duplicates = int(len(keep) - keep.sum())
+        stamp_arr, log_arr, table = stamp_arr[keep], log_arr[keep], table[keep]
+        columns: dict[str, FloatArray] = {}
+        start = 0
+        for name, cols in self.decoder.columns.items():
+            columns[name] = table[:, start:start + cols]
+            start += cols
+        return Series(self.topic, stamp_arr, log_arr, columns, duplicates, self.slow)
 
 
 def read_series(path: str | Path, decoders: Mapping[str, Decoder], *,
@@ -173,21 +297,20 @@ def read_series(path: str | Path, decoders: Mapping[str, Decoder], *,
 
     Topics absent from the bag are absent from the result. ``progress``:
     True/False to force the stderr progress bar on or off, None for automatic.
+    Messages are decoded in batches, straight from their CDR bytes where they
+    share a layout (see :class:`_TopicBatches`).
 
     Raises:
-        BagError: unreadable bag, a topic of another type than its decoder's,
-            or a message without a header.
+        BagError: unreadable bag, or a topic of another type than its decoder's.
 
     """
-    store = typestore()
     with open_reader(path) as reader:
         connections = [c for c in reader.connections if c.topic in decoders]
         for conn in connections:
             if conn.msgtype != decoders[conn.topic].msgtype:
                 raise BagError(f'{conn.topic} is {conn.msgtype} in {path}, '
                                f'expected {decoders[conn.topic].msgtype}')
-        collected: dict[str, tuple[list[int], list[int], list[Row]]] = {
-            c.topic: ([], [], []) for c in connections}
+        batches = {c.topic: _TopicBatches(c.topic, decoders[c.topic]) for c in connections}
         total = sum(c.msgcount for c in connections)
         # None: a bar only if the read takes over a second; True: at once.
         with ProgressBar(f'reading {Path(path).name}',
@@ -195,25 +318,20 @@ def read_series(path: str | Path, decoders: Mapping[str, Decoder], *,
             show = progress is not False and total > 0
             for i, (conn, log_time, data) in enumerate(
                     reader.messages(connections=connections) if connections else ()):
-                msg: Any = store.deserialize_cdr(data, conn.msgtype)
-                stamps, logs, rows = collected[conn.topic]
-                stamp = msg.header.stamp
-                stamps.append(stamp_to_ns(stamp.sec, stamp.nanosec))
-                logs.append(log_time)
-                rows.append(decoders[conn.topic].extract(msg))
-                if show and i % 1024 == 0:
+                batches[conn.topic].add(data, log_time)
+                if show and i % 4096 == 0:
                     bar(i / total)
+            result = {topic: batch.series() for topic, batch in batches.items()}
             if show:
                 bar(1.0)
-    return {topic: _series(topic, decoders[topic], *parts)
-            for topic, parts in collected.items()}
+    return result
 
 
 def _times(stamps: NDArray[np.int64]) -> FloatArray:
     return np.array([seconds(int(ns)) for ns in stamps], dtype=float)
 
 
-def _exact(ticks: NDArray[np.int64], series: Series | None, column: str,
+def rows_at(ticks: NDArray[np.int64], series: Series | None, column: str,
            width: int) -> tuple[FloatArray, int]:
     """Rows of ``series`` stamped exactly at ``ticks``; NaN rows where absent."""
     out = np.full((len(ticks), width), NAN)
@@ -225,7 +343,7 @@ def _exact(ticks: NDArray[np.int64], series: Series | None, column: str,
     return out, int(len(ticks) - hit.sum())
 
 
-def _as_of(ticks: NDArray[np.int64], series: Series | None, column: str,
+def rows_as_of(ticks: NDArray[np.int64], series: Series | None, column: str,
            width: int) -> tuple[FloatArray, int]:
     """Rows of ``series`` with the latest stamp at or before each tick; NaN before the first."""
     out = np.full((len(ticks), width), NAN)
@@ -237,16 +355,19 @@ def _as_of(ticks: NDArray[np.int64], series: Series | None, column: str,
     return out, int(len(ticks) - hit.sum())
 
 
-def find_namespace(topics: Mapping[str, str]) -> str:
-    """The namespace of the one ``odom`` (nav_msgs/Odometry) topic among ``topics``."""
-    found = sorted(name[:-len('/odom')] for name, msgtype in topics.items()
-                   if name.endswith('/odom') and msgtype == ODOMETRY.msgtype)
+def find_namespace(topics: Mapping[str, str], relative: str = 'odom',
+                   msgtype: str = ODOMETRY.msgtype) -> str:
+    """The namespace of the one ``relative`` topic of type ``msgtype`` among ``topics``
+    (name -> type); by default the stack's ``odom`` (nav_msgs/Odometry)."""
+    suffix = f'/{relative}'
+    found = sorted(name[:-len(suffix)] for name, kind in topics.items()
+                   if name.endswith(suffix) and kind == msgtype)
     if len(found) == 1:
         return found[0]
     if not found:
-        raise BagError('the bag has no odom topic (nav_msgs/msg/Odometry)')
-    raise BagError(f'the bag has several odom topics ({", ".join(n + "/odom" for n in found)}); '
-                   'pass the namespace')
+        raise BagError(f'the bag has no {relative} topic ({msgtype})')
+    raise BagError(f'the bag has several {relative} topics '
+                   f'({", ".join(n + suffix for n in found)}); pass the namespace')
 
 
 def read_runlog(path: str | Path, *, namespace: str | None = None,
@@ -285,20 +406,20 @@ def read_runlog(path: str | Path, *, namespace: str | None = None,
         'nu': odom.columns['nu'],
     }
     for name in ('tilt_position', 'tilt_velocity', 'thrust'):
-        arrays[name], missing[name] = _exact(ticks, get('joint_states'), name,
+        arrays[name], missing[name] = rows_at(ticks, get('joint_states'), name,
                                              PLANT_FIELDS[name])
 
     wrench_cmd = get('wrench_cmd')
     control = wrench_cmd.stamps if wrench_cmd is not None else np.zeros(0, dtype=np.int64)
     arrays['tc'] = _times(control)
     control_sources: dict[str, tuple[str, str, Callable[..., tuple[FloatArray, int]]]] = {
-        'setpoint_position': ('setpoint', 'position', _as_of),
-        'setpoint_quaternion': ('setpoint', 'quaternion', _as_of),
-        'setpoint_velocity': ('setpoint_velocity', 'velocity', _as_of),
-        'wrench_cmd': ('wrench_cmd', 'wrench', _exact),
-        'thrust_cmd': ('thrust_cmd', 'thrust', _exact),
-        'tilt_cmd': ('tilt_cmd', 'tilt', _exact),
-        'wrench_achieved': ('wrench_achieved', 'wrench', _exact),
+        'setpoint_position': ('setpoint', 'position', rows_as_of),
+        'setpoint_quaternion': ('setpoint', 'quaternion', rows_as_of),
+        'setpoint_velocity': ('setpoint_velocity', 'velocity', rows_as_of),
+        'wrench_cmd': ('wrench_cmd', 'wrench', rows_at),
+        'thrust_cmd': ('thrust_cmd', 'thrust', rows_at),
+        'tilt_cmd': ('tilt_cmd', 'tilt', rows_at),
+        'wrench_achieved': ('wrench_achieved', 'wrench', rows_at),
     }
     for name, (rel, column, join) in control_sources.items():
         if name == 'setpoint_velocity' and names[rel] not in info.topics:
@@ -313,6 +434,7 @@ def read_runlog(path: str | Path, *, namespace: str | None = None,
         'message_counts': {name: t.count for name, t in sorted(info.topics.items())},
         'missing': {k: v for k, v in missing.items() if v},
         'duplicate_stamps': {s.topic: s.duplicates for s in series.values() if s.duplicates},
+        'decoded_one_by_one': {s.topic: s.one_by_one for s in series.values() if s.one_by_one},
         'log_start_ns': info.start_ns,
         'log_duration_ns': info.duration_ns,
     }

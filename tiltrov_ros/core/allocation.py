@@ -200,7 +200,8 @@ class AllocationResult:
 
 @dataclass(frozen=True)
 class BatchResult:
-    """Allocation of many wrenches at once (rows independent)."""
+    """Allocation of many wrenches, one row each (:meth:`ThrustAllocator.allocate_batch`:
+    rows independent; :func:`allocate_sequence`: rows chained through ``previous``)."""
 
     thrusts: FloatArray      # (n, 4) [N]
     tilt_front: FloatArray   # (n,) [rad]
@@ -208,6 +209,36 @@ class BatchResult:
     achieved: FloatArray     # (n, 6)
     feasible: BoolArray      # (n,)
     error: FloatArray        # (n,) weighted wrench error
+
+    @property
+    def tilts(self) -> FloatArray:
+        """(n, 2): (tilt_front, tilt_rear) [rad]."""
+        return np.column_stack([self.tilt_front, self.tilt_rear])
+
+    @classmethod
+    def stack(cls, results: Sequence[AllocationResult]) -> BatchResult:
+        """Rows of single results, in order."""
+        n = len(results)
+        return cls(np.array([r.thrusts for r in results], dtype=float).reshape(n, 4),
+                   np.array([r.tilt_front for r in results], dtype=float),
+                   np.array([r.tilt_rear for r in results], dtype=float),
+                   np.array([r.achieved for r in results], dtype=float).reshape(n, 6),
+                   np.array([r.feasible for r in results], dtype=bool),
+                   np.array([r.error for r in results], dtype=float))
+
+
+def infeasible_rows(requested: ArrayLike, achieved: ArrayLike, max_thrust: float) -> BoolArray:
+    """The allocator's feasibility test, row by row, negated: True where
+    ||achieved - requested|| > FEASIBILITY_RTOL * max(||requested||, max_thrust).
+
+    ``requested`` and ``achieved`` are (n, 6); a row with a NaN is not counted
+    infeasible (a value missing from a recording says nothing either way).
+    """
+    req = np.asarray(requested, dtype=float)
+    miss = np.linalg.norm(np.asarray(achieved, dtype=float) - req, axis=-1)
+    tol = FEASIBILITY_RTOL * np.maximum(np.linalg.norm(req, axis=-1), max_thrust)
+    out: BoolArray = miss > tol
+    return out
 
 
 @dataclass(frozen=True)
@@ -401,8 +432,13 @@ class ThrustAllocator:
         else:
             configs, disc = self._candidates(tau)
             if configs is None:
-                # A family: select with the vectorised twin (hundreds of samples).
-                result_or_none = self._choose_family(tau, prev)
+                # A family: the symmetric one in closed form, else the vectorised
+                # selector (hundreds of samples).
+                symmetric = self._symmetric_family(tau, prev, box)
+                result_or_none = (None if symmetric is None
+                                  else self._choose(tau, symmetric, math.nan, prev, box))
+                if result_or_none is None:
+                    result_or_none = self._choose_family(tau, prev)
                 configs = self._configs_from_batch(tau) if result_or_none is None else []
             else:
                 result_or_none = self._choose(tau, configs, disc, prev, box)
@@ -561,11 +597,16 @@ class ThrustAllocator:
             thrusts[i], tilts[i] = res.thrusts, res.tilts
         thrusts[:, ~self._available] = 0.0
         achieved = self.wrench(thrusts, tilts[:, 0], tilts[:, 1])
-        error = np.linalg.norm((achieved - taus) * self.weights, axis=1)
-        tol = FEASIBILITY_RTOL * np.maximum(np.linalg.norm(taus, axis=1), self.max_thrust)
-        feasible = finite & (np.linalg.norm(achieved - taus, axis=1) <= tol)
+        error = self.weighted_error(taus, achieved)
+        feasible = finite & ~infeasible_rows(taus, achieved, self.max_thrust)
         return BatchResult(thrusts, tilts[:, 0].copy(), tilts[:, 1].copy(), achieved,
                            feasible, error)
+
+    def weighted_error(self, requested: ArrayLike, achieved: ArrayLike) -> FloatArray:
+        """||W (achieved - requested)|| row by row ((n, 6) -> (n,)), W = ``weights``."""
+        diff = np.asarray(achieved, dtype=float) - np.asarray(requested, dtype=float)
+        out: FloatArray = np.linalg.norm(diff * self.weights, axis=-1)
+        return out
 
     # ------------------------------------------------------------------ boundaries
 
@@ -693,6 +734,53 @@ class ThrustAllocator:
                 thrusts = np.array([f1, f2, f3, f4]) * scale
             configs.append(_Config(thrusts, np.array([alpha, beta]), False, (free_f, free_r)))
         return configs, disc
+
+    def _symmetric_family(self, tau: FloatArray, prev: FloatArray | None,
+                          box: FloatArray) -> list[_Config] | None:
+        """The members of family F1 that can be chosen, when Y = K = N = 0.
+
+        Then each pair's two thrusters are alike: (h, z) = (V, Zf)/2 at the front
+        and (H - V, Zr)/2 at the rear, so tan(alpha) = Zf / V,
+        tan(beta) = Zr / (H - V), and the thrusts squared sum to
+        (V^2 + (H - V)^2 + Zf^2 + Zr^2)/2, a convex quadratic in V. Its least
+        value over the V that qualify (a union of intervals bounded by a tilt at
+        an edge of its reach, a thrust at its limit, or a pair without
+        horizontal force) is V = H/2 or one of those bounds: these few members
+        are returned (None when the wrench is not of this kind), for
+        :meth:`_choose` to pick among, as it picks among exact roots.
+        """
+        scale = max(abs(float(v)) for v in tau)
+        if scale == 0.0:
+            return None
+        X, Y, Z, K, M, N = (float(v) / scale for v in tau)
+        Zf, Zr = -0.5 * Z + M / self.length, -0.5 * Z - M / self.length
+        Df, Dr = 0.5 * (SQRT2 * Y + N / self._k), 0.5 * (SQRT2 * Y - N / self._k)
+        kappa, H = 2.0 * K / self.width, SQRT2 * X
+        mag = max(abs(Zf), abs(Zr), abs(Df), abs(Dr), abs(kappa), abs(H))
+        if max(abs(Df), abs(Dr), abs(kappa)) > _FAMILY_RTOL * mag:
+            return None
+        values = {0.5 * H, 0.0, H}
+        limit = 2.0 * self.max_thrust / scale          # |(h, z)| of a pair's thruster, x2
+        for p, (Zp, sign, offset) in enumerate(((Zf, 1.0, 0.0), (Zr, -1.0, H))):
+            tilts = [float(box[p, 0]), float(box[p, 1])]
+            if prev is not None:
+                tilts.append(float(prev[p]))
+            for t in tilts:
+                tan_t = math.tan(t)
+                if abs(tan_t) > 1e-12 and abs(tan_t) < 1e12:
+                    values.add((Zp / tan_t - offset) * sign)     # h_p = Zp / tan(t)
+            if limit > abs(Zp):
+                reach = math.sqrt(limit * limit - Zp * Zp)
+                values.update(((reach - offset) * sign, (-reach - offset) * sign))
+        configs = []
+        for V in sorted(values):
+            f1, f2, alpha, free_f = _pair_scalar(0.5 * Zf, 0.5 * V, 0.5 * Zf, 0.5 * V)
+            f3, f4, beta, free_r = _pair_scalar(0.5 * Zr, 0.5 * (H - V), 0.5 * Zr,
+                                                0.5 * (H - V))
+            with np.errstate(over='ignore'):
+                thrusts = np.array([f1, f2, f3, f4]) * scale
+            configs.append(_Config(thrusts, np.array([alpha, beta]), True, (free_f, free_r)))
+        return configs
 
     def _choose_family(self, tau: FloatArray,
                        prev: FloatArray | None) -> AllocationResult | None:
@@ -978,8 +1066,12 @@ class ThrustAllocator:
         are solved apart, so a few hovering rows do not slow the rest down.
         """
         family = _family_rows(taus, self.length, self.width, self._k)
+        # Symmetric family rows go through allocate() (closed form), so the
+        # batch form answers exactly as single calls do.
+        family &= ~_symmetric_rows(taus, self.length, self.width, self._k)
+        symmetric = _symmetric_rows(taus, self.length, self.width, self._k)
         rows_out, f_out, t_out = [], [], []
-        for subset in (np.flatnonzero(~family), np.flatnonzero(family)):
+        for subset in (np.flatnonzero(~family & ~symmetric), np.flatnonzero(family)):
             if len(subset) == 0:
                 continue
             sub_prev = None if prev is None else prev[subset]
@@ -1046,6 +1138,38 @@ class ThrustAllocator:
         tol = FEASIBILITY_RTOL * np.maximum(np.linalg.norm(tau, axis=1), self.max_thrust)
         good = np.linalg.norm(achieved - tau, axis=1) <= tol
         return rows[good], f[good], t[good]
+
+
+def allocate_sequence(allocator: ThrustAllocator, wrenches: ArrayLike,
+                      tilt_requests: ArrayLike | None = None, *,
+                      previous: AllocationResult | None = None) -> list[AllocationResult]:
+    """Allocate ``wrenches`` (n, 6) in order, as the ``thrust_allocator`` node does.
+
+    Each call's ``previous`` is the answer to the row before (the first row's is
+    ``previous``), so the tilts move least and within ``max_tilt_step`` along
+    the sequence. ``tilt_requests`` (n, 2), optional: rows with finite values
+    hold the tilts there (:meth:`ThrustAllocator.allocate_fixed`, the switching
+    baseline's tilt request), rows with a NaN are allocated freely.
+    """
+    taus = np.asarray(wrenches, dtype=float)
+    if taus.ndim != 2 or taus.shape[1] != 6:
+        raise AllocationError(f'wrenches must have shape (n, 6), got {taus.shape}')
+    requests = None
+    if tilt_requests is not None:
+        requests = np.asarray(tilt_requests, dtype=float)
+        if requests.shape != (len(taus), 2):
+            raise AllocationError(f'tilt_requests must have shape ({len(taus)}, 2), '
+                                  f'got {requests.shape}')
+    results: list[AllocationResult] = []
+    for i, tau in enumerate(taus):
+        request = None if requests is None else requests[i]
+        if request is not None and bool(np.all(np.isfinite(request))):
+            previous = allocator.allocate_fixed(tau, float(request[0]), float(request[1]),
+                                                previous=previous)
+        else:
+            previous = allocator.allocate(tau, previous=previous)
+        results.append(previous)
+    return results
 
 
 def _norm(v: FloatArray) -> float:
@@ -1133,6 +1257,15 @@ def _classify(tau: FloatArray, length: float, width: float, k: float
     fam2 = small_P & small_Q & small_H
     fam3 = small_k & small_H & (np.abs(P + Q) <= tol2) & ~(small_P & small_Q)
     return (Zf, Zr, Df, Dr, kappa, H, P, Q, mag), (fam1, fam2, fam3), s
+
+
+def _symmetric_rows(tau: FloatArray, length: float, width: float, k: float) -> BoolArray:
+    """Rows of family F1 with Y = K = N = 0 (see ThrustAllocator._symmetric_family)."""
+    (_, _, Df, Dr, kappa, _, _, _, mag), _, _ = _classify(tau, length, width, k)
+    tol = _FAMILY_RTOL * mag
+    out: BoolArray = ((np.abs(Df) <= tol) & (np.abs(Dr) <= tol) & (np.abs(kappa) <= tol)
+                      & (np.max(np.abs(tau), axis=1) > 0))
+    return out
 
 
 def _family_rows(tau: FloatArray, length: float, width: float, k: float) -> BoolArray:

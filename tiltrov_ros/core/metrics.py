@@ -71,9 +71,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from tiltrov_ros.core.allocation import FEASIBILITY_RTOL
+from tiltrov_ros.core.allocation import infeasible_rows
 from tiltrov_ros.core.controllers import DOF_NAMES
-from tiltrov_ros.core.kinematics import euler_from_quat, ssa
+from tiltrov_ros.core.kinematics import euler_from_quat_rows, ssa
 from tiltrov_ros.core.runlog import RunLog
 
 FloatArray = NDArray[np.float64]
@@ -122,7 +122,7 @@ class ControlErrors:
 def _euler_rows(quaternions: FloatArray) -> FloatArray:
     if len(quaternions) == 0:
         return np.zeros((0, 3))
-    return np.array([euler_from_quat(q) for q in quaternions])
+    return euler_from_quat_rows(quaternions)
 
 
 def match_ticks(log: RunLog) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
@@ -246,9 +246,8 @@ def compute_metrics(log: RunLog, *, max_thrust: float | None = None) -> dict[str
         at_limit = np.abs(log.thrust_cmd) >= limit * (1.0 - SATURATION_RTOL)
         metrics['thrust_saturation_fraction'] = float(np.mean(np.any(at_limit, axis=1)))
         duty: FloatArray | None = np.mean(at_limit, axis=0)
-        miss = np.linalg.norm(log.wrench_achieved - log.wrench_cmd, axis=1)
-        tol = FEASIBILITY_RTOL * np.maximum(np.linalg.norm(log.wrench_cmd, axis=1), limit)
-        infeasible: float | None = float(np.mean(miss > tol))
+        infeasible: float | None = float(np.mean(
+            infeasible_rows(log.wrench_cmd, log.wrench_achieved, limit)))
     else:
         metrics['thrust_saturation_fraction'] = None
         duty = None
@@ -288,3 +287,27 @@ def write_metrics(metrics: dict[str, Any], path: str | Path) -> Path:
     target = Path(path)
     target.write_text(json.dumps(metrics, indent=2, allow_nan=False) + '\n', encoding='utf-8')
     return target
+
+
+def metric_differences(got: Any, expected: Any, *, rtol: float = 1e-9, atol: float = 1e-9,
+                       path: str = 'metrics') -> list[str]:
+    """Where two metrics dictionaries differ: one line per difference, empty when equal.
+
+    Keys must match in order; counts, strings and nulls exactly; floats to
+    ``rtol``/``atol`` (as :func:`math.isclose`). ``tiltrov demo`` checks a
+    recorded run against the headless one with it, the tests likewise.
+    """
+    if type(got) is not type(expected):
+        return [f'{path}: {type(got).__name__} {got!r} != {type(expected).__name__} '
+                f'{expected!r}']
+    if isinstance(expected, dict):
+        if list(got) != list(expected):
+            return [f'{path}: keys {list(got)} != {list(expected)}']
+        return [line for key in expected
+                for line in metric_differences(got[key], expected[key], rtol=rtol, atol=atol,
+                                               path=f'{path}.{key}')]
+    if isinstance(expected, float):
+        if not math.isclose(got, expected, rel_tol=rtol, abs_tol=atol):
+            return [f'{path}: {got!r} != {expected!r}']
+        return []
+    return [] if got == expected else [f'{path}: {got!r} != {expected!r}']
