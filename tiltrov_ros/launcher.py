@@ -197,7 +197,8 @@ def stack_specs(options: LaunchOptions, *, config_dir: Path | None = None,
         plant['stall_timeout'] = float(options.stall_timeout)
     controller = {'controller': kind, 'mode': mode, **sim, **robot}
     allocator: dict[str, Any] = {
-        'tilt_request': 'required' if kind == 'switching' else 'ignored', **sim, **robot}
+        'tilt_request': 'required' if kind == 'switching' else 'ignored',
+        'scenario': scenario_param, **sim, **robot}
     if options.allocator is not None:
         allocator['mode'] = options.allocator
     reference = {'scenario': scenario_param, 'duration': duration, **sim, **robot}

@@ -20,7 +20,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 import math
 
-from tiltrov_ros.core.errors import TiltrovError
+from tiltrov_ros.core.errors import ParameterError, TiltrovError
 from tiltrov_ros.core.timebase import NS_PER_S
 
 NON_FINITE = 'non_finite'          # NaN or infinity in a value the node uses
@@ -191,6 +191,35 @@ def limit_command(thrusts: Sequence[float], tilts: Sequence[float], max_thrust: 
             return None
         out_a.append(min(max(float(a), tilt_min), tilt_max))
     return out_f, out_a
+
+
+def failed_thruster_indices(value: object, name: str = 'failed_thrusters') -> tuple[int, ...]:
+    """Core indices 0..3 of a ``failed_thrusters`` value: thruster numbers 1..4
+    (thruster_1..thruster_4), or empty. Raises ParameterError naming ``name``."""
+    if value is None:
+        return ()
+    if isinstance(value, (str, bytes)) or not isinstance(value, Iterable):
+        raise ParameterError(name, f'got {value!r}; allowed: a list of thruster numbers '
+                                   '1..4 (thruster_1..thruster_4), [] for none')
+    numbers = list(value)
+    if not all(isinstance(n, int) and not isinstance(n, bool) and 1 <= n <= 4
+               for n in numbers) or len(set(numbers)) != len(numbers):
+        raise ParameterError(name, f'got {numbers!r}; allowed: distinct thruster numbers '
+                                   '1..4 (thruster_1..thruster_4), [] for none')
+    return tuple(sorted(n - 1 for n in numbers))
+
+
+#: N and N m: wrench components beyond this are clipped before allocation. Far
+#: beyond anything four thrusters make (a few hundred N), and small enough that the
+#: allocator's squares and products stay finite.
+MAX_WRENCH = 1e6
+
+
+def clip_wrench(wrench: Sequence[float], bound: float = MAX_WRENCH) -> tuple[list[float], bool]:
+    """The finite ``wrench`` with each component clipped to +-``bound``, and whether
+    anything was clipped (the allocator answers such a wrench as well as it can)."""
+    out = [min(max(float(v), -bound), bound) for v in wrench]
+    return out, any(a != b for a, b in zip(out, wrench))
 
 
 def _short(values: Iterable[float]) -> str:

@@ -35,7 +35,11 @@ import rclpy
 from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
 from rclpy.context import Context
-from rclpy.exceptions import ParameterException
+from rclpy.exceptions import (
+    InvalidParameterTypeException,
+    InvalidParameterValueException,
+    ParameterException,
+)
 from rclpy.executors import (
     Executor,
     ExternalShutdownException,
@@ -53,6 +57,7 @@ from rclpy.qos import (
 )
 from rclpy.task import Future
 from sensor_msgs.msg import JointState
+import yaml
 
 from tiltrov_ros.core import validation
 from tiltrov_ros.core.errors import ParameterError, TiltrovError
@@ -359,6 +364,65 @@ _ROBOT_DOC: dict[str, tuple[str, tuple[float, float] | None]] = {
 }
 
 
+def allowed_text(d: ParameterDescriptor | None, default: Any) -> str:
+    """What a parameter accepts, from its descriptor and default (for error messages)."""
+    kind = {bool: 'true or false', int: 'an integer', float: 'a number', str: 'a string',
+            list: 'a list'}.get(type(default), 'a value of the declared type')
+    parts = [kind]
+    if d is not None:
+        for r in d.floating_point_range:
+            parts.append(f'in [{r.from_value:g}, {r.to_value:g}]')
+        for r in d.integer_range:
+            parts.append(f'in [{r.from_value}, {r.to_value}]')
+        if d.additional_constraints:
+            parts.append(f'({d.additional_constraints})')
+    return ' '.join(parts)
+
+
+def _flatten(doc: Any, prefix: str = '') -> set[str]:
+    names: set[str] = set()
+    if isinstance(doc, Mapping):
+        for key, value in doc.items():
+            names |= _flatten(value, f'{prefix}{key}.') if isinstance(value, Mapping) else {
+                f'{prefix}{key}'}
+    return names
+
+
+def parameter_source(name: str, node_name: str, args: Sequence[str]) -> str | None:
+    """The last ``--params-file`` in ``args`` that sets ``name`` (or ``robot.<name>``)
+    for ``node_name`` or ``/**``; None when no file does (an override, ``-p``)."""
+    files = [args[i + 1] for i, a in enumerate(args[:-1]) if a == '--params-file']
+    for path in reversed(files):
+        try:
+            with open(path, encoding='utf-8') as stream:
+                doc = yaml.safe_load(stream)
+        except (OSError, yaml.YAMLError):
+            continue
+        if not isinstance(doc, Mapping):
+            continue
+        for key, section in doc.items():
+            key = str(key)
+            if key not in ('/**', '**', node_name) and not key.endswith(f'/{node_name}'):
+                continue
+            params = section.get('ros__parameters') if isinstance(section, Mapping) else None
+            names = _flatten(params)
+            if name in names or f'robot.{name}' in names:
+                return str(path)
+    return None
+
+
+def declare_failed_thrusters(node: Node) -> tuple[int, ...]:
+    """Declare ``failed_thrusters`` (thruster numbers 1..4, run-time changeable) and
+    return the core indices (0..3). Validated by
+    :func:`tiltrov_ros.core.validation.failed_thruster_indices`."""
+    d = descriptor('thrusters that give no thrust, by number: 1..4 = thruster_1..thruster_4 '
+                   '(e.g. [2]); [] none; settable at run time',
+                   constraints='distinct integers 1..4')
+    d.dynamic_typing = True     # [] has no element type
+    value = node.declare_parameter('failed_thrusters', [], d).value
+    return validation.failed_thruster_indices(value)
+
+
 def declare_robot(node: Node) -> tuple[RobotParams, float]:
     """Declare ``robot.*`` and ``control_period`` (the shared robot.yaml) and return them.
 
@@ -526,6 +590,8 @@ class TiltrovNode(Node):
         super().__init__(node_name, namespace=namespace, context=context,
                          cli_args=list(cli_args) if cli_args is not None else None,
                          parameter_overrides=as_parameters(parameter_overrides))
+        #: Where parameter files are named (error messages say which file set a value).
+        self._source_args = [*(cli_args or ()), *sys.argv]
         self.callback_errors = 0
         self.steady = steady_clock()
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS,
@@ -540,6 +606,21 @@ class TiltrovNode(Node):
         self._reject_log: dict[tuple[str, str], tuple[int, int]] = {}
         self._rejected_at_last_report = 0
         self._safe_publishers: list[SafePublisher] = []
+
+    def declare_parameter(self, name: str, value: Any = None,
+                          descriptor: ParameterDescriptor | None = None,
+                          ignore_override: bool = False) -> Parameter:
+        """rclpy's, but a value of the wrong type or out of range (from a parameter
+        file or an override) raises :class:`ParameterError` naming the parameter, the
+        value, the allowed range and the file it came from."""
+        try:
+            return super().declare_parameter(name, value, descriptor, ignore_override)
+        except (InvalidParameterTypeException, InvalidParameterValueException) as exc:
+            given = getattr(self, '_parameter_overrides', {}).get(name)
+            got = given.value if given is not None else value
+            raise ParameterError(
+                name, f'got {got!r}; allowed: {allowed_text(descriptor, value)}',
+                source=parameter_source(name, self.get_name(), self._source_args)) from exc
 
     # -- hooks for subclasses ---------------------------------------------------
 
@@ -575,6 +656,38 @@ class TiltrovNode(Node):
             self.stamp_bounds = StampBounds.from_seconds(
                 self.get_parameter('stamp_max_future').value,
                 self.get_parameter('stamp_max_age').value)
+
+    # -- watchdogs ---------------------------------------------------------------
+
+    def declare_timeout(self, name: str, default: float, text: str) -> float:
+        """Declare a watchdog timeout ``name`` (s, run-time changeable, 0: off)."""
+        value = self.declare_parameter(name, default, descriptor(
+            f'{text}, s; on sim time measured on /clock, else wall time since the message '
+            'arrived; 0: off', floating=(0.0, 3600.0))).value
+        return float(value)
+
+    def input_age_ns(self, stamp: int, received: int) -> int:
+        """How old an input stamped ``stamp`` that arrived at steady time ``received`` is:
+        on sim time, by ``/clock`` (0 before the first one: sim time is not running);
+        on system time, the wall time since it arrived."""
+        if self.on_sim_time():
+            now = self.clock_ns()
+            return 0 if now is None else now - stamp
+        return self.steady_ns() - received
+
+    def on_sim_time(self) -> bool:
+        return bool(getattr(self.get_clock(), 'ros_time_is_active', False))
+
+    def estimated_now_ns(self, stamp: int, received: int, period: int) -> int:
+        """The stamp for a watchdog's output: sim time now on /clock, else ``stamp``
+        plus the wall time since it arrived; after ``stamp``, and never a multiple of
+        ``period`` (a control tick), so that no answer to a real tick, which downstream
+        nodes cache by stamp, is ever confused with it."""
+        now = self.clock_ns()
+        if now is None:
+            now = stamp + self.steady_ns() - received
+        now = max(now, stamp + 1)
+        return now + 1 if now % period == 0 else now
 
     def clock_ns(self) -> int | None:
         """The clock input stamps are checked against, ns: sim time when the node
@@ -788,7 +901,13 @@ def main_loop(factory: Callable[[], TiltrovNode], args: list[str] | None, name: 
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except STARTUP_ERRORS as exc:
-        print(f'{name}: {exc}', file=sys.stderr, flush=True)
+        text = str(exc)
+        if isinstance(exc, ParameterError) and exc.source is None:
+            source = parameter_source(exc.name, name, list(args or sys.argv))
+            prefix = f'parameter {exc.name!r}'
+            if source and text.startswith(prefix):
+                text = f'{prefix} (in {source}){text[len(prefix):]}'
+        print(f'{name}: {text}', file=sys.stderr, flush=True)
         code = 1
     finally:
         if executor is not None:

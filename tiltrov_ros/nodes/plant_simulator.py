@@ -40,6 +40,7 @@ import sys
 from typing import Any
 
 from nav_msgs.msg import Odometry
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.duration import Duration
 from rclpy.parameter import Parameter
 from rclpy.task import Future
@@ -51,9 +52,15 @@ from tiltrov_ros.core.errors import ParameterError
 from tiltrov_ros.core.kinematics import quat_from_euler
 from tiltrov_ros.core.params import RobotParams
 from tiltrov_ros.core.plant import Plant
-from tiltrov_ros.core.scenarios import InitialState, Scenario, load_scenario
+from tiltrov_ros.core.scenarios import (
+    InitialState,
+    Scenario,
+    ThrusterFault,
+    failed_at,
+    load_scenario,
+)
 from tiltrov_ros.core.timebase import seconds, to_ns
-from tiltrov_ros.core.validation import InvalidInput
+from tiltrov_ros.core.validation import InvalidInput, failed_thruster_indices
 from tiltrov_ros.core.validation import stamp_ns as checked_stamp_ns
 
 from .common import (
@@ -73,6 +80,7 @@ from .common import (
     WARN,
     Overrides,
     TiltrovNode,
+    declare_failed_thrusters,
     declare_robot,
     descriptor,
     fill_joint_state,
@@ -121,6 +129,9 @@ class PlantConfig:
     stall_timeout: float             # s, wall
     startup_subscribers: int
     startup_delay: float             # s, wall
+    command_timeout: float = 0.5     # s, sim time; 0: off
+    failed_thrusters: tuple[int, ...] = ()          # indices 0..3 (parameter)
+    faults: tuple[ThrusterFault, ...] = ()          # the scenario's
 
     def build_plant(self) -> Plant:
         """The plant at the initial state, as ``StackConfig.build_plant`` makes it."""
@@ -170,6 +181,11 @@ def declare_parameters(node: TiltrovNode) -> PlantConfig:
         'wall seconds to wait once the readers are there, so that every other '
         'pair of endpoints (e.g. a bag recorder and the allocator) is matched too',
         read_only=True, floating=(0.0, 60.0))).value
+    command_timeout = d('command_timeout', 0.5, descriptor(
+        'realtime: sim seconds without a thrust_cmd after which the thrusters are '
+        'commanded to zero (tilts held) until commands return; 0: off',
+        floating=(0.0, 3600.0))).value
+    failed = declare_failed_thrusters(node)
     node.declare_stamp_bounds()
     robot, period = declare_robot(node)
     node.check_overrides()
@@ -198,7 +214,8 @@ def declare_parameters(node: TiltrovNode) -> PlantConfig:
         initial_state=scenario.initial_state if scenario is not None else InitialState(),
         scenario=scenario_name, duration_ns=duration_ns, exit_at_end=bool(exit_at_end),
         stall_timeout=float(stall_timeout), startup_subscribers=int(startup_subscribers),
-        startup_delay=float(startup_delay))
+        startup_delay=float(startup_delay), command_timeout=float(command_timeout),
+        failed_thrusters=failed, faults=scenario.faults if scenario is not None else ())
 
 
 class PlantSimulator(TiltrovNode):
@@ -234,6 +251,10 @@ class PlantSimulator(TiltrovNode):
         self._waiting_since: int | None = None     # steady ns, while waiting at a tick
         self._stalled = False                      # the present wait is a stall
         self._last_applied = [-1, -1]              # realtime: stamps of the held commands
+        self._last_thrust_at: int | None = None    # realtime: sim ns of the last thrust_cmd
+        self.commands_stale = False
+        self.stale_events = 0
+        self._update_failed()
         self.stalls = 0
         self.startup_retries = 0
         self.republished = 0
@@ -244,6 +265,7 @@ class PlantSimulator(TiltrovNode):
         self._step_timer = None
         self._watchdog_timer = self.create_timer(WATCHDOG_PERIOD, self._watchdog,
                                                  clock=self.steady)
+        self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
         self.start_diagnostics()
         c = self.config
@@ -310,6 +332,12 @@ class PlantSimulator(TiltrovNode):
             if ns >= self._last_applied[kind]:
                 self._last_applied[kind] = ns
                 self._command(kind, values)
+                if kind == 0:
+                    self._last_thrust_at = self.plant.time_ns
+                    if self.commands_stale:
+                        self.commands_stale = False
+                        self.get_logger().info(f'thrust_cmd again (stamped {format_ns(ns)}): '
+                                               'commands resume')
             return
         self._hold(ns, kind, values)
 
@@ -360,8 +388,39 @@ class PlantSimulator(TiltrovNode):
                     del self._pending[stamp]
                 self._waiting_since = None
                 self._stalled = False
-            plant.step()
-            self._publish_state()
+            self._step()
+
+    def _step(self) -> None:
+        """One plant step (the scenario's faults applied first), then the state out."""
+        if self.config.faults:
+            self._update_failed()
+        self.plant.step()
+        self._publish_state()
+
+    def _update_failed(self) -> None:
+        """Failed thrusters: the parameter's plus the scenario's failed by now."""
+        failed = tuple(sorted(set(self.config.failed_thrusters) | set(
+            failed_at(self.config.faults, seconds(self.plant.time_ns)))))
+        if failed != self.plant.failed_thrusters:
+            self.plant.set_failed_thrusters(failed)
+            self.get_logger().warning(
+                f'at {format_ns(self.plant.time_ns)}: failed thruster(s): '
+                f'{", ".join(THRUSTERS[i] for i in failed) or "none"}')
+
+    def _check_commands(self) -> None:
+        """realtime: zero thrust (tilts held) once thrust_cmd is command_timeout old."""
+        timeout = self.config.command_timeout
+        last = self._last_thrust_at
+        if (last is None or timeout <= 0 or self.commands_stale
+                or self.plant.time_ns - last <= to_ns(timeout)):
+            return
+        self.commands_stale = True
+        self.stale_events += 1
+        self.plant.command(thrusts=(0.0,) * 4)
+        self.get_logger().warning(
+            f'no thrust_cmd for {seconds(self.plant.time_ns - last):.3f} s of sim time '
+            f'(command_timeout {timeout:g} s): thrusters commanded to zero until commands '
+            'return')
 
     @guarded
     def _watchdog(self) -> None:
@@ -452,17 +511,32 @@ class PlantSimulator(TiltrovNode):
                     'sim time falls behind', throttle_duration_sec=THROTTLE)
                 self._rebase()
                 break
-            self.plant.step()
-            self._publish_state()
+            self._check_commands()
+            self._step()
             steps += 1
         if self._reached_end():
             self._finish()
 
     # -- parameters ------------------------------------------------------------------
 
+    def _validate_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
+        for p in parameters:
+            if p.name == 'failed_thrusters':
+                try:
+                    failed_thruster_indices(p.value)
+                except ParameterError as exc:
+                    return self.reject(str(exc))
+        return SetParametersResult(successful=True)
+
     def _apply_parameters(self, parameters: list[Parameter]) -> None:
         """Run-time changes (ranges, types and read-only are checked by rclpy)."""
         for p in parameters:
+            if p.name == 'failed_thrusters':
+                self.config = replace(self.config,
+                                      failed_thrusters=failed_thruster_indices(p.value))
+                self._update_failed()
+            elif p.name == 'command_timeout':
+                self.config = replace(self.config, command_timeout=float(p.value))
             if p.name == 'real_time_factor':
                 self.config = replace(self.config, real_time_factor=float(p.value))
                 if not self.lockstep:
@@ -487,6 +561,10 @@ class PlantSimulator(TiltrovNode):
         elif self._stalled:
             level = WARN
             message = f'stalled at {format_ns(t)}: waiting for thrust_cmd/tilt_cmd'
+        elif self.commands_stale:
+            level = WARN
+            message = (f'no thrust_cmd for more than command_timeout '
+                       f'{self.config.command_timeout:g} s: thrusters at zero')
         if self.stalls and level == OK:
             message += f' ({self.stalls} stall(s) so far)'
         plant = self.plant
@@ -498,6 +576,8 @@ class PlantSimulator(TiltrovNode):
             'rejected_thrust_commands': plant.thrusters.rejected,
             'rejected_tilt_commands': plant.servos.rejected,
             'finished': self.finished.done(),
+            'commands_stale': self.commands_stale, 'command_stale_events': self.stale_events,
+            'failed_thrusters': [i + 1 for i in plant.failed_thrusters],
         }
 
     def wait_for_delivery(self, timeout: float = 0.5) -> bool:

@@ -189,9 +189,18 @@ class WrenchController(TiltrovNode):
         self.safe_answers = 0
         self.resets = 0
         self.last_mode = ''
+        self._odom_seen: tuple[int, int] | None = None     # (stamp, steady ns) of the newest
+        self.odom_stale = False
+        self.stale_events = 0
+        self.watchdog_outputs = 0
 
         if self.lockstep:
             self.create_timer(WATCHDOG_PERIOD, self._watchdog, clock=self.steady)
+        else:
+            # In lockstep the plant does not advance without the loop: sim time never
+            # runs ahead of odom, and a wrench for a tick not reached would break the
+            # run's determinism; the plant reports the stall.
+            self.create_timer(self.control_period, self._odom_watchdog, clock=self.steady)
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
         self.start_diagnostics()
@@ -217,6 +226,9 @@ class WrenchController(TiltrovNode):
         self.input_timeout = d('input_timeout', 1.0, descriptor(
             'lockstep: wall seconds to wait for the setpoint_velocity of a tick before '
             'reading it as zero', floating=(0.001, 3600.0))).value
+        self.odom_timeout = self.declare_timeout(
+            'odom_timeout', 0.5, 'realtime: a zero wrench is published (every control '
+            'period) while the newest valid odom is older than this')
         self.declare_stamp_bounds()
         for key in GAIN_KEYS:
             d(f'gains.{key}', [float(v) for v in getattr(shipped.gains, key)], descriptor(
@@ -248,6 +260,9 @@ class WrenchController(TiltrovNode):
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, parameters: list[Parameter]) -> None:
+        for p in parameters:
+            if p.name == 'odom_timeout':
+                self.odom_timeout = float(p.value)
         if not any(p.name.startswith(('gains.', 'switching.')) for p in parameters):
             return
         self.controller_config = ControllerConfig.from_mapping(
@@ -281,7 +296,13 @@ class WrenchController(TiltrovNode):
         check_finite(position, 'position')
         check_quaternion(quaternion)
         check_finite(nu, 'twist')
-        self._tick = _Tick(ns, position, quaternion, nu, self.steady_ns())
+        now = self.steady_ns()
+        self._odom_seen = (ns, now)
+        if self.odom_stale:
+            self.odom_stale = False
+            self.get_logger().info(f'odom fresh again (stamped {format_ns(ns)}): control '
+                                   'resumes')
+        self._tick = _Tick(ns, position, quaternion, nu, now)
         self._try_compute()
 
     @input_callback(SETPOINT)
@@ -377,6 +398,29 @@ class WrenchController(TiltrovNode):
             self._tick = None
             self._publish_safe(stamp)
 
+    @guarded
+    def _odom_watchdog(self) -> None:
+        """realtime: a zero wrench while odom is stale (not cached: the next fresh
+        tick is computed as usual)."""
+        seen = self._odom_seen
+        if seen is None or self.odom_timeout <= 0:
+            return
+        age = self.input_age_ns(*seen)
+        if age <= to_ns(self.odom_timeout):
+            return
+        if not self.odom_stale:
+            self.odom_stale = True
+            self.stale_events += 1
+            self.get_logger().warning(
+                f'odom is stale: the newest (stamped {format_ns(seen[0])}) is '
+                f'{age / 1e9:.3f} s old (odom_timeout {self.odom_timeout:g} s); publishing a '
+                'zero wrench until fresh odometry returns')
+        self.watchdog_outputs += 1
+        ns = self.estimated_now_ns(*seen, self.period_ns)
+        self._publish(fill_wrench(new_wrench(), ns, np.zeros(6)),
+                      None if self._tilt_pub is None else fill_joint_state(
+                          new_joint_state(TILTS), ns, position=self._safe_tilts))
+
     def _reset(self, why: str) -> None:
         self.resets += 1
         self.get_logger().info(f'{why}: resetting the controller')
@@ -417,7 +461,11 @@ class WrenchController(TiltrovNode):
     def diagnostic_status(self) -> tuple[int, str, dict[str, Any]]:
         level, message = OK, f'{self.kind}: {self.ticks} ticks'
         tick = self._tick
-        if (tick is not None and self.lockstep
+        if self.odom_stale:
+            level = WARN
+            message = (f'odom stale (older than odom_timeout {self.odom_timeout:g} s): '
+                       'publishing a zero wrench')
+        elif (tick is not None and self.lockstep
                 and (self.steady_ns() - tick.since) / 1e9 >= self.input_timeout):
             level = WARN
             message = f'waiting for the setpoint stamped {format_ns(tick.ns)}'
@@ -431,7 +479,9 @@ class WrenchController(TiltrovNode):
             'republished': self.republished, 'setpoint_waits': self.setpoint_waits,
             'velocity_timeouts': self.velocity_timeouts,
             'ticks_without_setpoint': self.no_setpoint, 'safe_answers': self.safe_answers,
-            'resets': self.resets,
+            'resets': self.resets, 'odom_stale': self.odom_stale,
+            'odom_stale_events': self.stale_events,
+            'watchdog_zero_wrenches': self.watchdog_outputs,
         }
 
 
