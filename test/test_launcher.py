@@ -243,3 +243,56 @@ def test_record_gives_a_bag_equal_to_the_headless_run(tmp_path: Path,
                  'thrust_cmd', 'tilt_cmd', 'wrench_achieved'):
         np.testing.assert_allclose(getattr(recorded, name), getattr(expected, name),
                                    rtol=0, atol=1e-9, err_msg=name)
+
+
+@pytest.mark.slow
+def test_a_killed_allocator_is_respawned_and_the_loop_resumes(ros, tmp_path: Path) -> None:
+    """kill -9 of the allocator mid-run (lockstep, recorded, --respawn allocator): the
+    plant keeps its state and waits at its tick, the new allocator answers it, the run
+    ends normally, and the bag has every step and every tick of the other topics."""
+    from tiltrov_ros.bag.bagfile import iter_raw
+    from tiltrov_ros.bag.cdr import stamp_ns
+
+    bag = tmp_path / 'bag'
+    duration = 20.0
+    probe = Probe(ros.node('restart_probe'), ['/clock'])
+    process = subprocess.Popen(
+        _tiltrov('--duration', str(duration), '--record', str(bag), '--respawn',
+                 'thrust_allocator', '--stall-timeout', '0.5'),
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=tmp_path)
+    lines: list[str] = []
+    reader = threading.Thread(target=lambda: lines.extend(process.stdout or ()), daemon=True)
+    reader.start()
+    pids: dict[str, int] = {}
+    try:
+        def sim_time() -> float:
+            return probe.stamps('/clock')[-1] / 1e9 if probe['/clock'] else 0.0
+
+        assert ros.spin_until(lambda: sim_time() >= 5.0, timeout=60.0), ''.join(lines)
+        for line in list(lines):
+            if line.startswith('[launch]') and 'started ' in line:
+                pids[line.split('started ')[1].split()[0]] = int(
+                    line.rsplit('pid ', 1)[1].rstrip(')\n'))
+        os.kill(pids['thrust_allocator'], signal.SIGKILL)
+        killed_at = sim_time()
+        assert killed_at < duration
+        assert ros.spin_until(lambda: sim_time() >= duration, timeout=60.0), ''.join(lines)
+        assert process.wait(timeout=60) == 0, ''.join(lines)
+    finally:
+        _cleanup(process, pids)
+    reader.join(timeout=5)
+    out = ''.join(lines)
+    assert f'thrust_allocator died (exit code {-signal.SIGKILL}); starting it again' in out
+    assert out.count('started thrust_allocator') == 2
+
+    stamps: dict[str, set[int]] = {}
+    for raw in iter_raw(bag):
+        stamp = stamp_ns(raw.data, raw.msgtype)
+        if stamp is not None:
+            stamps.setdefault(raw.topic, set()).add(stamp)
+    steps = set(range(0, int(duration * 1000) + 1, 10))
+    ticks = set(range(0, int(duration * 1000), 50))
+    for topic in ('/odom', '/joint_states', '/clock'):
+        assert {s // MS for s in stamps[topic]} == steps, topic
+    for topic in ('/setpoint', '/wrench_cmd', '/thrust_cmd', '/tilt_cmd'):
+        assert {s // MS for s in stamps[topic]} >= ticks, topic

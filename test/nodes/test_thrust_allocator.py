@@ -329,3 +329,24 @@ def test_failed_thruster_set_at_run_time_is_never_used_and_reported(ros) -> None
     assert achieved[1][2] == pytest.approx(5.0, rel=2e-3)
     assert max(abs(shortfall[3]), abs(shortfall[4])) < 0.03
     assert shortfall[5] > 25.0
+
+
+@pytest.mark.parametrize(('line', 'message'), [
+    ('wrench_timeout: -1.0', "'wrench_timeout' (in {file}): got -1.0; allowed: a number in "
+                             '[0, 3600]'),
+    ('wrench_timeout: soon', "'wrench_timeout' (in {file}): got 'soon'; allowed: a number"),
+    ('weights: [1.0, 2.0]', "'weights' (in {file}): got [1.0, 2.0]; allowed: 6 finite"),
+])
+def test_a_broken_yaml_stops_the_process_naming_file_parameter_and_range(
+        tmp_path: Path, line: str, message: str) -> None:
+    import subprocess
+    import sys
+
+    bad = tmp_path / 'thrust_allocator.yaml'
+    bad.write_text(f'thrust_allocator:\n  ros__parameters:\n    {line}\n')
+    result = subprocess.run(
+        [sys.executable, '-m', 'tiltrov_ros.nodes.thrust_allocator', '--ros-args',
+         '--params-file', str(config_file('robot.yaml')), '--params-file', str(bad)],
+        capture_output=True, text=True, timeout=60)
+    assert result.returncode == 1
+    assert f"thrust_allocator: parameter {message.format(file=bad)}" in result.stderr

@@ -598,8 +598,11 @@ def main(args: list[str] | None = None) -> int:
     def until(node: Any) -> Future | None:
         return node.finished if node.config.exit_at_end else None
 
-    return main_loop(PlantSimulator, args, NODE_NAME, until=until,
-                     before_exit=lambda node: node.wait_for_delivery())
+    def before_exit(node: Any) -> None:
+        node.publish_diagnostics()      # the final counts, for recorders and tiltrov soak
+        node.wait_for_delivery()
+
+    return main_loop(PlantSimulator, args, NODE_NAME, until=until, before_exit=before_exit)
 
 
 if __name__ == '__main__':
