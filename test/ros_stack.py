@@ -199,3 +199,35 @@ def run_stack(context: Any, executor: Any, options: launcher.LaunchOptions, *,
             executor.remove_node(node)
             node.destroy_node()
     return run
+
+
+def clock_msg(ns: int) -> Clock:
+    msg = Clock()
+    msg.clock.sec, msg.clock.nanosec = divmod(ns, NS)
+    return msg
+
+
+def diagnostics(probe: Probe, node_name: str) -> dict[str, str]:
+    """Key values of the newest /diagnostics status of ``node_name`` ({} if none)."""
+    for array in reversed(probe['/diagnostics']):
+        for status in array.status:
+            if status.name.rsplit('/', 1)[-1] == node_name:
+                return {kv.key: kv.value for kv in status.values} | {
+                    '_level': str(status.level[0] if isinstance(status.level, bytes)
+                                  else status.level), '_message': status.message}
+    return {}
+
+
+def report(ros: Any, probe: Probe, node: Any) -> dict[str, str]:
+    """Make ``node`` publish /diagnostics now and return what the probe received."""
+    before = len(probe['/diagnostics'])
+    node.publish_diagnostics()
+    assert ros.spin_until(lambda: len(probe['/diagnostics']) > before, timeout=5.0)
+    return diagnostics(probe, node.get_name())
+
+
+def finite_outputs(probe: Probe) -> bool:
+    """No message the probe received carries NaN or infinity."""
+    from tiltrov_ros.nodes.common import message_is_finite
+    return all(message_is_finite(m) for topic, messages in probe.messages.items()
+               for m in messages if topic != '/diagnostics')

@@ -32,6 +32,8 @@ COMMANDS: dict[str, Command] = {
     'report': Command('.report', "run the paper's scenarios with every controller; results "
                                  'table and figures into README.md'),
     'analyze': Command('.analyze', 'metrics.json and figures of recorded runs (bags)'),
+    'soak': Command('.soak', 'one hour of simulated time in lockstep, recorded: RSS of each '
+                             'process, messages published vs recorded, stalls'),
     'launch': Command('.launcher', 'start the ROS stack (plant, controller, allocator, '
                                    'reference) for a scenario, lockstep or realtime'),
 }

@@ -17,6 +17,11 @@ in-process tests use: :func:`stack_specs` and :func:`build_nodes`).
 
 ``--record DIR`` adds the ``bag_recorder`` node (started first, stopped last)
 when the package has it (:data:`RECORDER_MODULE`).
+
+``--respawn NODE`` (controller, allocator or reference; repeatable) starts
+that node again, with the same arguments, when its process dies mid-run: the
+plant keeps its state, re-publishes the tick it waits at (lockstep) and the
+loop resumes with the new process (README.md, "Reliability").
 """
 
 from __future__ import annotations
@@ -58,6 +63,8 @@ RECORDER_MODULE = 'tiltrov_ros.nodes.bag_recorder'
 STOP_TIMEOUTS = (5.0, 3.0)
 #: s (wall) the plant waits, once the recorder reads odom, before the initial state.
 RECORDER_STARTUP_DELAY = 0.5
+#: Nodes ``--respawn`` may start again (the plant holds the run's state).
+RESPAWNABLE = (CONTROLLER, ALLOCATOR, REFERENCE)
 #: s (wall) the recorder gets to close its bag after SIGINT.
 RECORDER_STOP_TIMEOUT = 20.0
 POLL = 0.05
@@ -88,6 +95,7 @@ class LaunchOptions:
     params: tuple[str, ...] = ()           # 'node:name:=value'
     stall_timeout: float | None = None
     executor: str | None = None            # None: TILTROV_EXECUTOR or 'events'
+    respawn: tuple[str, ...] = ()          # node names started again when they die
 
 
 @dataclass(frozen=True)
@@ -197,7 +205,8 @@ def stack_specs(options: LaunchOptions, *, config_dir: Path | None = None,
         plant['stall_timeout'] = float(options.stall_timeout)
     controller = {'controller': kind, 'mode': mode, **sim, **robot}
     allocator: dict[str, Any] = {
-        'tilt_request': 'required' if kind == 'switching' else 'ignored', **sim, **robot}
+        'tilt_request': 'required' if kind == 'switching' else 'ignored',
+        'scenario': scenario_param, **sim, **robot}
     if options.allocator is not None:
         allocator['mode'] = options.allocator
     reference = {'scenario': scenario_param, 'duration': duration, **sim, **robot}
@@ -379,9 +388,26 @@ def _stop_children(children: Sequence[_Child], out: _Output,
         child.pump.join(timeout=2.0)
 
 
+class Monitor:
+    """Hooks of :func:`run_processes` (``tiltrov soak`` measures through them)."""
+
+    def poll(self, pids: Mapping[str, int]) -> None:
+        """Called about every POLL s with each live node's pid."""
+
+    def finished(self, pids: Mapping[str, int]) -> None:
+        """Called once the plant has ended the run, before the others are stopped."""
+
+
 def run_processes(specs: Sequence[NodeSpec], namespace: str, out: _Output,
-                  summary: str, workdir: Path, extra_env: Mapping[str, str] | None = None) -> int:
-    """Start every node as a process; return when the run ends or a node dies."""
+                  summary: str, workdir: Path, extra_env: Mapping[str, str] | None = None,
+                  *, respawn: Sequence[str] = (), monitor: Monitor | None = None,
+                  linger: float = 0.0) -> int:
+    """Start every node as a process; return when the run ends or a node dies.
+
+    A node named in ``respawn`` that dies is started again instead. ``linger``:
+    wall seconds to wait after the plant's end before stopping the others (their
+    last /diagnostics, with final counts, reach the recorder).
+    """
     env = dict(os.environ, PYTHONUNBUFFERED='1', RCUTILS_LOGGING_BUFFERED_STREAM='1',
                **(extra_env or {}))
     out.width = max(len(s.name) for s in specs)
@@ -403,7 +429,7 @@ def run_processes(specs: Sequence[NodeSpec], namespace: str, out: _Output,
     try:
         for sig in previous:
             signal.signal(sig, on_signal)
-        for spec in specs:
+        def start(spec: NodeSpec) -> _Child:
             argv = executable(spec) + spec.ros_args(spec.write_overrides(workdir, namespace),
                                                      namespace)
             process = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
@@ -412,22 +438,37 @@ def run_processes(specs: Sequence[NodeSpec], namespace: str, out: _Output,
             pump = threading.Thread(target=out.pump, args=(spec.name, process.stdout),
                                     daemon=True)
             pump.start()
-            children.append(_Child(spec, process, pump))
             out.line('launch', f'started {spec.name} (pid {process.pid})')
+            return _Child(spec, process, pump)
+
+        for spec in specs:
+            children.append(start(spec))
         while True:
-            for child in children:
+            for i, child in enumerate(children):
                 rc = child.process.poll()
                 if rc is None:
                     continue
                 if child.spec.name == PLANT and rc == 0:
                     wall = time.monotonic() - started
+                    if monitor is not None:
+                        monitor.finished(_pids(children))
+                    if linger > 0:
+                        time.sleep(linger)
                     out.line('launch', f'{summary} done in {wall:.2f} s wall; stopping the '
                                        'other nodes')
                     return code
+                if child.spec.name in respawn:
+                    child.pump.join(timeout=2.0)
+                    out.line('launch', f'{child.spec.name} died (exit code {rc}); starting '
+                                       'it again (--respawn)')
+                    children[i] = start(child.spec)
+                    continue
                 out.line('launch', f'{child.spec.name} died (exit code {rc}); stopping the '
                                    'other nodes')
                 code = EXIT_FAILED
                 return code
+            if monitor is not None:
+                monitor.poll(_pids(children))
             time.sleep(POLL)
     except _Stop as stop:
         out.line('launch', f'{stop.args[0]}: stopping every node')
@@ -444,6 +485,10 @@ def run_processes(specs: Sequence[NodeSpec], namespace: str, out: _Output,
             dead = [c.spec.name for c in children
                     if c.process.returncode not in (0, None, -signal.SIGINT)]
             print(f'tiltrov launch: failed: {", ".join(dead) or "a node"} died', file=sys.stderr)
+
+
+def _pids(children: Sequence[_Child]) -> dict[str, int]:
+    return {c.spec.name: c.process.pid for c in children if c.process.poll() is None}
 
 
 def run_single_process(specs: Sequence[NodeSpec], namespace: str, out: _Output,
@@ -544,6 +589,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "50.0]' (repeatable)")
     parser.add_argument('--stall-timeout', type=float, default=None, metavar='SEC',
                         help='lockstep: wall seconds before the plant reports a stall')
+    parser.add_argument('--respawn', action='append', default=[], choices=RESPAWNABLE,
+                        metavar='NODE',
+                        help='start NODE again when its process dies mid-run '
+                             f'({", ".join(RESPAWNABLE)}; repeatable)')
 
 
 def options_from_args(args: argparse.Namespace) -> LaunchOptions:
@@ -552,11 +601,14 @@ def options_from_args(args: argparse.Namespace) -> LaunchOptions:
         duration=args.duration, lockstep=args.lockstep,
         real_time_factor=args.real_time_factor, record=args.record,
         single_process=args.single_process, namespace=args.namespace,
-        params=tuple(args.param), stall_timeout=args.stall_timeout, executor=args.executor)
+        params=tuple(args.param), stall_timeout=args.stall_timeout, executor=args.executor,
+        respawn=tuple(args.respawn))
 
 
-def launch(options: LaunchOptions, stream: IO[str] | None = None) -> int:
-    """Run one launch; the exit code of ``tiltrov launch``."""
+def launch(options: LaunchOptions, stream: IO[str] | None = None, *,
+           monitor: Monitor | None = None, linger: float = 0.0) -> int:
+    """Run one launch; the exit code of ``tiltrov launch`` (``monitor``, ``linger``:
+    see :func:`run_processes`; separate processes only)."""
     out = _Output(stream if stream is not None else sys.stdout)
     namespace = normalize_namespace(options.namespace)
     try:
@@ -578,7 +630,8 @@ def launch(options: LaunchOptions, stream: IO[str] | None = None) -> int:
         if options.single_process:
             return run_single_process(specs, namespace, out, summary, options.executor)
         env = {'TILTROV_EXECUTOR': options.executor} if options.executor else {}
-        return run_processes(specs, namespace, out, summary, Path(tmp), env)
+        return run_processes(specs, namespace, out, summary, Path(tmp), env,
+                             respawn=options.respawn, monitor=monitor, linger=linger)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -222,3 +222,30 @@ def test_pitch_hold_pid_final_errors_with_the_60_deg_per_s_servo() -> None:
     assert _worst(m['final_error'], POSITIONS) < 0.005
     assert _worst(m['final_error'], ANGLES) < 0.2 * DEG
     _assert_tilts_continuous_within_rate(log, 60 * DEG)
+
+
+def test_thruster_failure_in_pitch_hold_what_the_robot_still_holds() -> None:
+    """config/scenarios/thruster_failure.yaml (pd): thruster_2 fails at 40 s. With the
+    other three, allocated depth and attitude first, the robot keeps its depth, roll
+    and the -30 deg pitch; it gives up yaw (it turns) and drifts in x and y."""
+    from tiltrov_ros.core.kinematics import euler_from_quat_rows
+
+    log = run_scenario(stack_config('thruster_failure', 'pd'))
+    assert log.meta['faults'] == [{'thruster': 2, 'at': 40.0, 'detected_after': 0.0}]
+    t, tc = log.t, log.tc
+    assert np.all(log.thrust_cmd[tc >= 40.0, 1] == 0.0)          # never commanded
+    assert np.max(np.abs(log.thrust[t >= 41.0, 1])) < 1e-3        # spun down
+    euler = euler_from_quat_rows(log.quaternion)
+    error = np.abs(euler - np.array([0.0, math.radians(-30.0), 0.0]))
+
+    def worst(a: float, b: float) -> tuple[np.ndarray, np.ndarray]:
+        m = (t >= a) & (t < b)
+        return np.max(np.abs(log.position[m]), axis=0), np.degrees(np.max(error[m], axis=0))
+
+    position, attitude = worst(30.0, 40.0)                        # all four: pitch_hold
+    assert position[2] < 0.035 and attitude[1] < 2.0
+    position, attitude = worst(60.0, 80.0)                        # three
+    assert position[2] < 0.1                                      # depth held
+    assert attitude[0] < 5.0 and attitude[1] < 5.0                # roll and pitch held
+    assert attitude[2] > 90.0                                     # yaw lost
+    assert 0.2 < max(position[0], position[1]) < 1.0              # x, y drift

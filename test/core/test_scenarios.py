@@ -281,3 +281,22 @@ def test_trajectory_is_section_4_2_as_documented() -> None:
                                        atol=1e-12)
     end, _ = scn.reference.eta(120.0)
     np.testing.assert_allclose(end[:3], [1.0, 0.0, -1.0], atol=1e-12)
+
+
+def test_faults_are_parsed_and_checked(tmp_path) -> None:
+    from tiltrov_ros.core.scenarios import ThrusterFault, failed_at
+
+    scn = load_scenario('thruster_failure')
+    assert scn.faults == (ThrusterFault(1, 40.0, 0.0),)
+    faults = (ThrusterFault(1, 40.0, 0.5), ThrusterFault(3, 10.0))
+    assert failed_at(faults, 9.99) == () and failed_at(faults, 40.0) == (1, 3)
+    assert failed_at(faults, 40.0, detected=True) == (3,)
+    assert failed_at(faults, 40.5, detected=True) == (1, 3)
+    for fault, message in [('{thruster: 5, at: 1.0}', r'faults\[0\]\.thruster: got 5'),
+                           ('{thruster: 2}', "needs 'at'"),
+                           ('{thruster: 2, at: -1}', 'must be >= 0'),
+                           ('{thruster: 2, at: 1, when: 3}', "unknown key 'when'")]:
+        path = tmp_path / 'bad.yaml'
+        path.write_text(f'duration: 1.0\nfaults:\n  - {fault}\n')
+        with pytest.raises(ScenarioError, match=message):
+            load_scenario(path)

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from rclpy.exceptions import InvalidParameterTypeException, ParameterException
+from rclpy.exceptions import ParameterException
 from rclpy.parameter import Parameter
-from ros_stack import KEEP_ALL, MS, Probe, joint_state
+from ros_stack import KEEP_ALL, MS, NS, Probe, finite_outputs, joint_state, report
 from sensor_msgs.msg import JointState
 
 from tiltrov_ros.core.errors import ParameterError
@@ -55,8 +55,8 @@ def test_lockstep_initial_state_then_one_control_period_per_command(rig) -> None
     joints = probe['joint_states'][0]
     assert list(joints.name) == TILTS + THRUSTERS
     assert list(joints.position[:2]) == [0.0, 0.0] and list(joints.effort[2:]) == [0.0] * 4
-    assert all(math.isnan(v) for v in (*joints.position[2:], *joints.velocity[2:],
-                                       *joints.effort[:2]))
+    # A field a joint does not have is 0.0: no topic carries NaN.
+    assert list((*joints.position[2:], *joints.velocity[2:], *joints.effort[:2])) == [0.0] * 10
 
     # No command, no step.
     ros.spin_for(0.2)
@@ -210,7 +210,7 @@ def test_shipped_yaml_and_a_wrong_type_yaml(ros, tmp_path: Path) -> None:
 
     bad = tmp_path / 'plant_simulator.yaml'
     bad.write_text('plant_simulator:\n  ros__parameters:\n    step_size: 1\n')
-    with pytest.raises(InvalidParameterTypeException, match='step_size'):
+    with pytest.raises(ParameterError, match=f"'step_size' \\(in {bad}\\): got 1; allowed: "):
         PlantSimulator(context=ros.context, cli_args=['--ros-args', '--params-file', str(bad)])
 
 
@@ -233,3 +233,98 @@ def test_joint_states_values_are_the_plant_sample(rig) -> None:
     np.testing.assert_array_equal(msg.position[:2], sample.tilts)
     np.testing.assert_array_equal(msg.velocity[:2], sample.tilt_velocities)
     np.testing.assert_array_equal(msg.effort[2:], sample.thrusts)
+
+
+# --------------------------------------------------------------------------- reliability
+
+TICK = 5 * STEP
+GOOD_THRUSTS, GOOD_TILTS = [5.0, 5.0, 5.0, 5.0], [0.1, 0.1]
+
+
+def _thrust_msg(ns, names=THRUSTERS, **fields):
+    return joint_state(ns, names, **(fields or {'effort': GOOD_THRUSTS}))
+
+
+BAD_COMMANDS = {
+    'thrust_nan': ('thrust_cmd', 'non_finite', lambda: _thrust_msg(
+        0, effort=[1.0, math.nan, 0.0, 0.0])),
+    'thrust_inf': ('thrust_cmd', 'non_finite', lambda: _thrust_msg(
+        0, effort=[1.0, 0.0, -math.inf, 0.0])),
+    'thrust_wrong_length': ('thrust_cmd', 'wrong_length', lambda: _thrust_msg(
+        0, effort=[1.0, 2.0, 3.0])),
+    'thrust_wrong_velocity_length': ('thrust_cmd', 'wrong_length', lambda: _thrust_msg(
+        0, effort=GOOD_THRUSTS, velocity=[0.0])),
+    'thrust_unknown_joint': ('thrust_cmd', 'unknown_joint', lambda: _thrust_msg(
+        0, [*THRUSTERS[:3], 'thruster_9'], effort=GOOD_THRUSTS)),
+    'thrust_missing_joint': ('thrust_cmd', 'missing_joint', lambda: _thrust_msg(
+        0, THRUSTERS[:3], effort=GOOD_THRUSTS[:3])),
+    'thrust_duplicate_joint': ('thrust_cmd', 'duplicate_joint', lambda: _thrust_msg(
+        0, [*THRUSTERS, 'thruster_1'], effort=[*GOOD_THRUSTS, 1.0])),
+    'thrust_future_stamp': ('thrust_cmd', 'future_stamp', lambda: _thrust_msg(10 * NS)),
+    'tilt_nan': ('tilt_cmd', 'non_finite', lambda: joint_state(
+        0, TILTS, position=[math.nan, 0.0])),
+    'tilt_unknown_joint': ('tilt_cmd', 'unknown_joint', lambda: joint_state(
+        0, ['tilt_front', 'tilt_middle'], position=GOOD_TILTS)),
+}
+
+
+@pytest.mark.parametrize('case', sorted(BAD_COMMANDS))
+def test_bad_command_is_rejected_counted_and_the_run_goes_on(ros, case) -> None:
+    topic, reason, build = BAD_COMMANDS[case]
+    node = ros.node('plant_bad_test')
+    probe = Probe(node, ['odom', 'joint_states', '/clock', '/diagnostics'])
+    pubs = {'thrust_cmd': node.create_publisher(JointState, 'thrust_cmd', KEEP_ALL),
+            'tilt_cmd': node.create_publisher(JointState, 'tilt_cmd', KEEP_ALL)}
+    plant = _plant(ros, mode='lockstep', scenario='pitch_hold')
+    assert ros.spin_until(lambda: probe.stamps('odom') == [0])
+    assert ros.spin_until(lambda: all(p.get_subscription_count() > 0 for p in pubs.values()))
+    pubs[topic].publish(build())
+    assert ros.spin_until(lambda: plant.rejections[(topic, reason)] == 1)
+    # Valid commands for the present tick (the plant still waits there after a bad
+    # stamp; after bad content the tick counts as answered, the previous command
+    # holding), then for the next: the run goes on.
+    pubs['tilt_cmd'].publish(joint_state(0, TILTS, position=GOOD_TILTS))
+    pubs['thrust_cmd'].publish(_thrust_msg(0))
+    assert ros.spin_until(lambda: plant.plant.time_ns >= TICK)
+    pubs['tilt_cmd'].publish(joint_state(TICK, TILTS, position=GOOD_TILTS))
+    pubs['thrust_cmd'].publish(_thrust_msg(TICK))
+    assert ros.spin_until(lambda: probe.stamps('odom')[-1:] == [2 * TICK])
+    assert finite_outputs(probe)
+    assert plant.plant.thrusters.command_held == tuple(GOOD_THRUSTS)
+    values = report(ros, probe, plant)
+    assert values[f'rejected.{topic}.{reason}'] == '1' and values['callback_errors'] == '0'
+
+
+def test_realtime_command_watchdog_zero_thrust_and_recovery(rig) -> None:
+    ros, probe, command, _ = rig
+    plant = _plant(ros, mode='realtime', real_time_factor=5.0, command_timeout=0.3)
+    assert ros.spin_until(lambda: len(probe['odom']) > 0)
+    command(plant.plant.time_ns, [20.0] * 4, [0.0, 0.0])
+    assert ros.spin_until(lambda: plant.plant.thrusts[0] > 19.0)
+    # No more commands: after 0.3 s of sim time the thrusters are commanded to zero.
+    assert ros.spin_until(lambda: plant.commands_stale, timeout=5.0)
+    assert plant.plant.thrusters.command_held == (0.0,) * 4
+    assert ros.spin_until(lambda: abs(probe['joint_states'][-1].effort[2]) < 0.1)
+    values = report(ros, probe, plant)
+    assert values['commands_stale'] == 'True' and 'thrusters at zero' in values['_message']
+    # Commands again: applied at once.
+    command(plant.plant.time_ns, [10.0] * 4, [0.0, 0.0])
+    assert ros.spin_until(lambda: not plant.commands_stale)
+    assert ros.spin_until(lambda: probe['joint_states'][-1].effort[2] > 9.0)
+    assert finite_outputs(probe)
+
+
+def test_failed_thruster_parameter_at_start_and_at_run_time(rig) -> None:
+    ros, probe, command, _ = rig
+    plant = _plant(ros, mode='lockstep', failed_thrusters=[3])
+    assert plant.plant.failed_thrusters == (2,)
+    assert not plant.set_parameters([Parameter('failed_thrusters', value=[0])])[0].successful
+    assert plant.set_parameters([Parameter('failed_thrusters', value=[1, 4])])[0].successful
+    assert plant.plant.failed_thrusters == (0, 3)
+    assert ros.spin_until(lambda: probe.stamps('odom') == [0])
+    command(0, [10.0] * 4, [0.0, 0.0])
+    assert ros.spin_until(lambda: plant.plant.time_ns == TICK)
+    assert plant.plant.thrusts[0] == 0.0 and plant.plant.thrusts[3] == 0.0
+    assert plant.plant.thrusts[1] > 3.0      # working: toward 10 N with its 0.1 s lag
+    values = report(ros, probe, plant)
+    assert values['failed_thrusters'] == '[1, 4]'

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from ros_stack import KEEP_ALL, MS, Probe
+from ros_stack import KEEP_ALL, MS, Probe, finite_outputs, report
 from rosgraph_msgs.msg import Clock
 
 from tiltrov_ros.core.scenarios import load_scenario
@@ -93,3 +93,19 @@ def test_wall_time_without_sim_time(ros) -> None:
     stamps = probe.stamps('setpoint')
     assert stamps == sorted(stamps) and stamps[0] > 0
 
+
+
+def test_a_malformed_clock_is_rejected_counted_and_the_next_answered(rig) -> None:
+    ros, probe, clock, tick_clock = rig
+    node = _reference(ros, scenario='pitch_hold')
+    diag = Probe(ros.node('reference_diag'), ['/diagnostics'])
+    assert ros.spin_until(lambda: clock.get_subscription_count() > 0)
+    bad = Clock()
+    bad.clock.sec, bad.clock.nanosec = 1, 1_500_000_000      # nanosec >= 1e9: not a time
+    clock.publish(bad)
+    assert ros.spin_until(lambda: node.rejections[('/clock', 'bad_stamp')] == 1)
+    tick_clock(TICK)
+    assert ros.spin_until(lambda: probe.stamps('setpoint') == [TICK])
+    assert finite_outputs(probe)
+    values = report(ros, diag, node)
+    assert values['rejected./clock.bad_stamp'] == '1' and values['callback_errors'] == '0'

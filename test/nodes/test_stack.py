@@ -23,6 +23,7 @@ from ros_stack import (
 from tiltrov_ros import launcher
 from tiltrov_ros.core.runner import run_scenario, stack_config
 from tiltrov_ros.nodes.common import make_executor
+from tiltrov_ros.paths import config_file
 
 ATOL = 1e-9
 STEP = 10 * MS
@@ -133,3 +134,33 @@ def test_realtime_closed_loop_keeps_the_stamp_contract(ros) -> None:
     # Closed loop: the pitch follows the ramp (-30 deg in 30 s) and the rest stays put.
     position, _, _ = odom_rows(run.probe['odom'])
     assert np.max(np.abs(position)) < 0.05
+
+
+@pytest.mark.slow
+def test_thruster_failure_lockstep_equals_the_headless_run_and_is_reported(
+        ros, tmp_path) -> None:
+    """A thruster failing mid-run (the plant by the scenario's time, the allocator by
+    the wrench stamps): the same numbers as tiltrov sim, and the allocator says what
+    it allocates with and what it cannot achieve."""
+    scenario = tmp_path / 'failure.yaml'
+    text = (config_file('scenarios/thruster_failure.yaml').read_text()
+            .replace('at: 40.0', 'at: 1.0'))
+    scenario.write_text(text)
+    options = launcher.LaunchOptions(scenario=str(scenario), controller='pd', duration=2.0)
+    run = run_stack(ros.context, ros.executor, options)
+    log = run_scenario(stack_config(str(scenario), 'pd'), duration=2.0)
+    ticks = [i * TICK for i in range(40)]
+    thrust = run.probe.by_stamp('thrust_cmd')
+    np.testing.assert_allclose(effort_rows([thrust[t] for t in ticks]), log.thrust_cmd,
+                               rtol=0, atol=ATOL)
+    odom = run.probe.by_stamp('odom')
+    position, _, _ = odom_rows([odom[i * STEP] for i in range(201)])
+    np.testing.assert_allclose(position, log.position, rtol=0, atol=ATOL)
+    assert all(thrust[t].effort[1] == 0.0 for t in ticks[20:])
+
+    allocator, plant = run.node(launcher.ALLOCATOR), run.node(launcher.PLANT)
+    assert allocator.failed == (1,) and plant.plant.failed_thrusters == (1,)
+    _, message, values = allocator.diagnostic_status()
+    assert 'failed: thruster_2' in message and 'not achieved (ticks)' in message
+    assert values['failed_thrusters'] == [2]
+    assert sum(values['unachieved_ticks'].values()) > 0

@@ -2,18 +2,32 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 from geometry_msgs.msg import WrenchStamped
 import numpy as np
 import pytest
-from rclpy.exceptions import InvalidParameterTypeException
 from rclpy.parameter import Parameter
-from ros_stack import KEEP_ALL, MS, Probe, effort_rows, joint_state, wrench, wrench_rows
+from ros_stack import (
+    KEEP_ALL,
+    MS,
+    Probe,
+    clock_msg,
+    effort_rows,
+    finite_outputs,
+    joint_state,
+    report,
+    wrench,
+    wrench_rows,
+)
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
 from tiltrov_ros.core.allocation import load_allocator_config
+from tiltrov_ros.core.errors import ParameterError
 from tiltrov_ros.core.params import load_robot_params
+from tiltrov_ros.nodes.common import stamp_ns
 from tiltrov_ros.nodes.thrust_allocator import ThrustAllocatorNode
 from tiltrov_ros.paths import config_file
 
@@ -176,6 +190,163 @@ def test_shipped_yaml_and_a_wrong_type_yaml(ros, tmp_path: Path) -> None:
     assert node.allocator_config == load_allocator_config()
     bad = tmp_path / 'thrust_allocator.yaml'
     bad.write_text('thrust_allocator:\n  ros__parameters:\n    weights: [1, 1, 10, 10, 10, 1]\n')
-    with pytest.raises(InvalidParameterTypeException, match='weights'):
+    with pytest.raises(ParameterError, match=f"'weights' \\(in {bad}\\): got \\[1, 1,"):
         ThrustAllocatorNode(context=ros.context,
                             cli_args=['--ros-args', '--params-file', str(bad)])
+
+
+# --------------------------------------------------------------------------- reliability
+
+T0 = 20 * 1_000_000_000
+NAN, INF = math.nan, math.inf
+ROBOT = load_robot_params()
+
+
+def _sim_rig(ros, **overrides):
+    """An allocator on sim time (/clock at T0), its inputs and a probe."""
+    node = ros.node('allocator_sim_test')
+    probe = Probe(node, ['thrust_cmd', 'tilt_cmd', 'wrench_achieved', '/diagnostics'])
+    pubs = {'wrench_cmd': node.create_publisher(WrenchStamped, 'wrench_cmd', KEEP_ALL),
+            'tilt_request': node.create_publisher(JointState, 'tilt_request', KEEP_ALL),
+            '/clock': node.create_publisher(Clock, '/clock', KEEP_ALL)}
+    overrides.setdefault('tilt_request', 'ignored')
+    allocator = _allocator(ros, use_sim_time=True, **overrides)
+    subscribed = [p for name, p in pubs.items()
+                  if name != 'tilt_request' or allocator.tilt_request_mode != 'ignored']
+    assert ros.spin_until(lambda: all(p.get_subscription_count() > 0 for p in subscribed))
+    pubs['/clock'].publish(clock_msg(T0))
+    assert ros.spin_until(lambda: allocator.clock_ns() == T0)
+    return allocator, probe, pubs
+
+
+def _within_limits(probe: Probe) -> bool:
+    thrusts = [v for m in probe['thrust_cmd'] for v in m.effort]
+    tilts = [v for m in probe['tilt_cmd'] for v in m.position]
+    return (all(abs(f) <= ROBOT.max_thrust for f in thrusts)
+            and all(ROBOT.tilt_min <= a <= ROBOT.tilt_max for a in tilts))
+
+
+def _framed(msg, frame):
+    msg.header.frame_id = frame
+    return msg
+
+
+BAD_INPUTS = {
+    'wrench_nan': ('wrench_cmd', 'non_finite', lambda: wrench(T0, [NAN, 0, 0, 0, 0, 0])),
+    'wrench_inf': ('wrench_cmd', 'non_finite', lambda: wrench(T0, [0, 0, 0, 0, -INF, 0])),
+    'wrench_wrong_frame': ('wrench_cmd', 'wrong_frame',
+                           lambda: _framed(wrench(T0, W1), 'odom_ned')),
+    'wrench_future_stamp': ('wrench_cmd', 'future_stamp', lambda: wrench(T0 + 10**10, W1)),
+    'wrench_old_stamp': ('wrench_cmd', 'old_stamp', lambda: wrench(T0 - 10**10, W1)),
+    'tilt_request_unknown_joint': ('tilt_request', 'unknown_joint', lambda: joint_state(
+        T0, ['tilt_front', 'tilt_middle'], position=[0.1, 0.2])),
+    'tilt_request_wrong_length': ('tilt_request', 'wrong_length', lambda: joint_state(
+        T0, ['tilt_front', 'tilt_rear'], position=[0.1])),
+    'tilt_request_missing_joint': ('tilt_request', 'missing_joint', lambda: joint_state(
+        T0, ['tilt_front'], position=[0.1])),
+    'tilt_request_nan': ('tilt_request', 'non_finite', lambda: joint_state(
+        T0, ['tilt_front', 'tilt_rear'], position=[NAN, 0.0])),
+}
+
+
+@pytest.mark.parametrize('case', sorted(BAD_INPUTS))
+def test_bad_input_is_rejected_counted_and_the_next_valid_one_answered(ros, case) -> None:
+    topic, reason, build = BAD_INPUTS[case]
+    request = topic == 'tilt_request'
+    allocator, probe, pubs = _sim_rig(ros, tilt_request='required' if request else 'ignored')
+    pubs[topic].publish(build())
+    assert ros.spin_until(lambda: allocator.rejections[(topic, reason)] == 1)
+    if request:
+        pubs['tilt_request'].publish(joint_state(T0 + TICK, ['tilt_front', 'tilt_rear'],
+                                                 position=[0.1, 0.2]))
+    pubs['wrench_cmd'].publish(wrench(T0 + TICK, W1))        # valid: answered as usual
+    assert ros.spin_until(lambda: T0 + TICK in probe.stamps('thrust_cmd'))
+    assert finite_outputs(probe) and _within_limits(probe)
+    assert np.any(effort_rows([probe.by_stamp('thrust_cmd')[T0 + TICK]]) != 0.0)
+    if topic == 'wrench_cmd' and 'stamp' not in reason:   # a bad tick: zero thrust
+        assert np.all(effort_rows([probe.by_stamp('thrust_cmd')[T0]]) == 0.0)
+    values = report(ros, probe, allocator)
+    assert values[f'rejected.{topic}.{reason}'] == '1'
+    assert values['rejected_messages'] == '1' and values['callback_errors'] == '0'
+
+
+def test_never_beyond_the_thrust_limit_or_tilt_range_whatever_it_receives(ros) -> None:
+    allocator, probe, pubs = _sim_rig(ros, max_tilt_step=10.0)
+    wrenches = [[1e12, -1e12, 1e12, 1e9, -1e9, 1e9], [0, 0, 1e300, 0, 0, 0],
+                [-1e-300, 5e-324, 0, 0, 0, 0], [400, 400, -400, 100, 100, -100]]
+    for i, values in enumerate(wrenches):
+        pubs['wrench_cmd'].publish(wrench(T0 + i * TICK, values))
+    assert ros.spin_until(lambda: len(probe['thrust_cmd']) == len(wrenches))
+    assert finite_outputs(probe) and _within_limits(probe)
+    assert allocator.callback_errors == 0
+
+
+def test_wrench_watchdog_zero_thrust_when_stale_and_recovery(ros) -> None:
+    allocator, probe, pubs = _sim_rig(ros, wrench_timeout=0.2)
+    pubs['wrench_cmd'].publish(wrench(T0, W1))
+    assert ros.spin_until(_answered(probe, 1))
+    held = list(probe['tilt_cmd'][-1].position)
+    pubs['/clock'].publish(clock_msg(T0 + 300 * MS))
+    assert ros.spin_until(lambda: allocator.wrench_stale and len(probe['thrust_cmd']) > 1
+                          and len(probe['tilt_cmd']) > 1)
+    zero, tilts = probe['thrust_cmd'][-1], probe['tilt_cmd'][-1]
+    assert list(zero.effort) == [0.0] * 4 and list(tilts.position) == held
+    assert stamp_ns(zero.header.stamp) > T0
+    values = report(ros, probe, allocator)
+    assert values['wrench_stale'] == 'True' and 'wrench_cmd stale' in values['_message']
+    pubs['wrench_cmd'].publish(wrench(T0 + 300 * MS, W2))
+    assert ros.spin_until(lambda: not allocator.wrench_stale)
+    assert ros.spin_until(lambda: np.any(effort_rows(probe['thrust_cmd'][-1:]) != 0.0))
+    count = len(probe['thrust_cmd'])
+    ros.spin_for(0.15)
+    assert len(probe['thrust_cmd']) == count and finite_outputs(probe)
+
+
+def test_failed_thruster_set_at_run_time_is_never_used_and_reported(ros) -> None:
+    allocator, probe, pubs = _sim_rig(ros)
+    hover = [0.0, 0.0, 5.0, 0.0, 0.0, 0.0]
+    pubs['wrench_cmd'].publish(wrench(T0, hover))
+    assert ros.spin_until(lambda: len(probe['thrust_cmd']) == 1)
+    assert allocator.set_parameters([Parameter('failed_thrusters', value=[7])])[0].successful \
+        is False
+    assert allocator.set_parameters([Parameter('failed_thrusters', value=[2])])[0].successful
+    assert allocator.failed == (1,) and allocator.allocator.failed_thrusters == (1,)
+    # Hovering with three thrusters is still exact; a yaw moment as well is not.
+    demands = [hover, [0.0, 0.0, 5.0, 0.0, 0.0, 30.0]]
+    for i, values in enumerate(demands, start=1):
+        pubs['wrench_cmd'].publish(wrench(T0 + i * TICK, values))
+    assert ros.spin_until(_answered(probe, 3))
+    assert all(m.effort[1] == 0.0 for m in probe['thrust_cmd'][1:])
+    assert finite_outputs(probe) and _within_limits(probe)
+    achieved = wrench_rows(probe['wrench_achieved'][1:])
+    np.testing.assert_allclose(achieved[0], hover, atol=1e-6)
+    values = report(ros, probe, allocator)
+    assert values['failed_thrusters'] == '[2]' and 'failed: thruster_2' in values['_message']
+    assert "'N': 1" in values['unachieved_ticks']
+    shortfall = [float(v) for v in values['last_shortfall'].strip('[]').split(',')]
+    # Depth and attitude first: the heave force is met to 0.2 %, roll and pitch to
+    # 0.03 N m; the yaw moment is what is given up.
+    assert achieved[1][2] == pytest.approx(5.0, rel=2e-3)
+    assert max(abs(shortfall[3]), abs(shortfall[4])) < 0.03
+    assert shortfall[5] > 25.0
+
+
+@pytest.mark.parametrize(('line', 'message'), [
+    ('wrench_timeout: -1.0', "'wrench_timeout' (in {file}): got -1.0; allowed: a number in "
+                             '[0, 3600]'),
+    ('wrench_timeout: soon', "'wrench_timeout' (in {file}): got 'soon'; allowed: a number"),
+    ('weights: [1.0, 2.0]', "'weights' (in {file}): got [1.0, 2.0]; allowed: 6 finite"),
+])
+def test_a_broken_yaml_stops_the_process_naming_file_parameter_and_range(
+        tmp_path: Path, line: str, message: str) -> None:
+    import subprocess
+    import sys
+
+    bad = tmp_path / 'thrust_allocator.yaml'
+    bad.write_text(f'thrust_allocator:\n  ros__parameters:\n    {line}\n')
+    result = subprocess.run(
+        [sys.executable, '-m', 'tiltrov_ros.nodes.thrust_allocator', '--ros-args',
+         '--params-file', str(config_file('robot.yaml')), '--params-file', str(bad)],
+        capture_output=True, text=True, timeout=60)
+    assert result.returncode == 1
+    assert f"thrust_allocator: parameter {message.format(file=bad)}" in result.stderr

@@ -3,21 +3,37 @@
 from __future__ import annotations
 
 from dataclasses import replace
+import math
 from pathlib import Path
 
 from geometry_msgs.msg import PoseStamped, TwistStamped
 from nav_msgs.msg import Odometry
 import numpy as np
 import pytest
-from rclpy.exceptions import InvalidParameterTypeException
 from rclpy.parameter import Parameter
-from ros_stack import KEEP_ALL, MS, Probe, odometry, pose, twist, wrench_rows
+from ros_stack import (
+    KEEP_ALL,
+    MS,
+    Probe,
+    clock_msg,
+    finite_outputs,
+    odometry,
+    pose,
+    report,
+    twist,
+    wrench_rows,
+)
+from rosgraph_msgs.msg import Clock
 
 from tiltrov_ros.core.controllers import Reference, load_controller_config, make_controller
+from tiltrov_ros.core.errors import ParameterError
 from tiltrov_ros.core.kinematics import quat_from_euler
 from tiltrov_ros.core.params import load_robot_params
+from tiltrov_ros.nodes.common import stamp_ns
 from tiltrov_ros.nodes.wrench_controller import WrenchController
 from tiltrov_ros.paths import config_file
+
+NS_ = 1_000_000_000
 
 TICK = 50 * MS
 POSITION = [0.1, -0.05, 0.2]
@@ -207,7 +223,8 @@ def test_shipped_yaml_defaults_and_a_wrong_type_yaml(ros, tmp_path: Path) -> Non
     bad = tmp_path / 'wrench_controller.yaml'
     bad.write_text('wrench_controller:\n  ros__parameters:\n    switching:\n'
                    '      dwell_time: 1\n')
-    with pytest.raises(InvalidParameterTypeException, match=r'switching\.dwell_time'):
+    with pytest.raises(ParameterError, match=rf"'switching\.dwell_time' \(in {bad}\): got 1; "
+                       r'allowed: a number in \[0, 1e\+06\]'):
         WrenchController(context=ros.context, cli_args=['--ros-args', '--params-file', str(bad)])
     with pytest.raises(Exception, match='controller'):
         WrenchController(context=ros.context, parameter_overrides={'controller': 'lqr'})
@@ -226,3 +243,93 @@ def test_diagnostics_report_the_ticks(rig) -> None:
                    for m in probe['/diagnostics'] for s in m.status)
 
     assert ros.spin_until(reported, timeout=5.0)
+
+
+# --------------------------------------------------------------------------- reliability
+
+T0 = 20 * NS_
+INF, NAN = math.inf, math.nan
+
+
+def _sim_rig(ros, **overrides):
+    """A realtime controller on sim time, its inputs, /clock at T0 and a probe."""
+    node = ros.node('controller_sim_test')
+    probe = Probe(node, ['wrench_cmd', '/diagnostics'])
+    pubs = {'odom': node.create_publisher(Odometry, 'odom', KEEP_ALL),
+            'setpoint': node.create_publisher(PoseStamped, 'setpoint', KEEP_ALL),
+            'setpoint_velocity': node.create_publisher(TwistStamped, 'setpoint_velocity',
+                                                       KEEP_ALL),
+            '/clock': node.create_publisher(Clock, '/clock', KEEP_ALL)}
+    controller = ros.add(WrenchController(context=ros.context, parameter_overrides={
+        'mode': 'realtime', 'use_sim_time': True, **overrides}))
+    assert ros.spin_until(lambda: all(p.get_subscription_count() > 0 for p in pubs.values()))
+    pubs['/clock'].publish(clock_msg(T0))
+    assert ros.spin_until(lambda: controller.clock_ns() == T0)
+    pubs['setpoint'].publish(pose(T0, *SETPOINT))
+    pubs['setpoint_velocity'].publish(twist(T0, VELOCITY))
+    assert ros.spin_until(lambda: controller._latest_velocity is not None)
+    return controller, probe, pubs
+
+
+def _odom(ns, frame='odom_ned', child='base_link_frd', position=POSITION,
+          quaternion=QUATERNION, nu=NU):
+    msg = odometry(ns, position, quaternion, nu)
+    msg.header.frame_id, msg.child_frame_id = frame, child
+    return msg
+
+
+BAD_INPUTS = {
+    'odom_nan_position': ('odom', 'non_finite', lambda: _odom(T0, position=[NAN, 0, 0])),
+    'odom_inf_twist': ('odom', 'non_finite', lambda: _odom(T0, nu=[0, 0, 0, 0, INF, 0])),
+    'odom_wrong_frame': ('odom', 'wrong_frame', lambda: _odom(T0, frame='map')),
+    'odom_wrong_child_frame': ('odom', 'wrong_frame', lambda: _odom(T0, child='base_link')),
+    'odom_zero_quaternion': ('odom', 'bad_quaternion', lambda: _odom(T0, quaternion=[0] * 4)),
+    'odom_future_stamp': ('odom', 'future_stamp', lambda: _odom(T0 + 10 * NS_)),
+    'odom_old_stamp': ('odom', 'old_stamp', lambda: _odom(T0 - 10 * NS_)),
+    'setpoint_nan': ('setpoint', 'non_finite', lambda: pose(T0, [0, NAN, 0], SETPOINT[1])),
+    'setpoint_wrong_frame': ('setpoint', 'wrong_frame',
+                             lambda: pose(T0, *SETPOINT, frame_id='map')),
+    'setpoint_velocity_inf': ('setpoint_velocity', 'non_finite',
+                              lambda: twist(T0, [INF, 0, 0, 0, 0, 0])),
+}
+
+
+@pytest.mark.parametrize('case', sorted(BAD_INPUTS))
+def test_bad_input_is_rejected_counted_and_the_next_valid_one_answered(ros, case) -> None:
+    topic, reason, build = BAD_INPUTS[case]
+    controller, probe, pubs = _sim_rig(ros)
+    pubs[topic].publish(build())
+    assert ros.spin_until(lambda: controller.rejections[(topic, reason)] == 1)
+    pubs['odom'].publish(_odom(T0 + TICK))            # valid: answered as usual
+    assert ros.spin_until(lambda: T0 + TICK in probe.stamps('wrench_cmd'))
+    assert finite_outputs(probe)
+    answer = probe.by_stamp('wrench_cmd')[T0 + TICK]
+    assert np.any(wrench_rows([answer]) != 0.0)
+    if topic == 'odom' and 'stamp' not in reason:     # a tick with bad content: zero wrench
+        assert np.all(wrench_rows([probe.by_stamp('wrench_cmd')[T0]]) == 0.0)
+    values = report(ros, probe, controller)
+    assert values[f'rejected.{topic}.{reason}'] == '1'
+    assert values['rejected_messages'] == '1' and values['callback_errors'] == '0'
+
+
+def test_odom_watchdog_zero_wrench_when_stale_and_recovery(ros) -> None:
+    controller, probe, pubs = _sim_rig(ros, odom_timeout=0.2)
+    pubs['odom'].publish(_odom(T0))
+    assert ros.spin_until(lambda: T0 in probe.stamps('wrench_cmd'))
+    # Sim time runs on without odometry: within one control period past the timeout
+    # the controller publishes a zero wrench and says so.
+    pubs['/clock'].publish(clock_msg(T0 + 300 * MS))
+    assert ros.spin_until(lambda: controller.odom_stale and len(probe['wrench_cmd']) > 1)
+    zero = probe['wrench_cmd'][-1]
+    assert stamp_ns(zero.header.stamp) > T0 and np.all(wrench_rows([zero]) == 0.0)
+    values = report(ros, probe, controller)
+    assert values['odom_stale'] == 'True' and 'odom stale' in values['_message']
+    # Fresh odometry: the control law again, the watchdog quiet.
+    pubs['odom'].publish(_odom(T0 + 300 * MS))
+    assert ros.spin_until(lambda: T0 + 300 * MS in probe.stamps('wrench_cmd'))
+    assert not controller.odom_stale
+    assert np.any(wrench_rows([probe.by_stamp('wrench_cmd')[T0 + 300 * MS]]) != 0.0)
+    count = len(probe['wrench_cmd'])
+    ros.spin_for(0.15)
+    assert len(probe['wrench_cmd']) == count and finite_outputs(probe)
+    assert report(ros, probe, controller)['odom_stale'] == 'False'

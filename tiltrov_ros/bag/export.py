@@ -8,7 +8,7 @@ Uses: turning a headless run into a bag for bag tools (Foxglove, ``tiltrov
 replay``), bags with known content for tests, and large bags for benchmarks.
 
 Per plant row: ``odom``, ``joint_states`` (tilts' position and velocity,
-thrusters' effort, NaN elsewhere, as ``plant_simulator`` fills it) and
+thrusters' effort, 0.0 elsewhere, as ``plant_simulator`` fills it) and
 ``/clock``; per control row: ``setpoint``, ``setpoint_velocity``,
 ``wrench_cmd``, ``tilt_cmd``, ``thrust_cmd`` and ``wrench_achieved``. Every
 message is stamped with its row's time and logged at it (a recorder on sim
@@ -20,7 +20,6 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Mapping
 import json
-import math
 from pathlib import Path
 from typing import Any
 
@@ -41,8 +40,9 @@ TILTS = ('tilt_front', 'tilt_rear')
 PLANT_TOPICS = ('odom', 'joint_states', CLOCK_TOPIC)
 CONTROL_TOPICS = ('setpoint', 'setpoint_velocity', 'wrench_cmd', 'tilt_cmd', 'thrust_cmd',
                   'wrench_achieved')
-NAN2 = (math.nan, math.nan)
-NAN4 = (math.nan,) * 4
+#: joint_states fields a joint does not have: 0.0, as the plant fills them (no NaN on a topic).
+ABSENT2 = (0.0, 0.0)
+ABSENT4 = (0.0,) * 4
 
 
 class _Messages:
@@ -123,8 +123,8 @@ def _rows(log: RunLog, m: _Messages) -> Iterator[tuple[int, str, Any]]:
     for i, ns in enumerate(plant_ns):
         yield ns, 'odom', m.odom(ns, log.position[i], log.quaternion[i], log.nu[i])
         yield ns, 'joint_states', m.joints(
-            ns, TILTS + THRUSTERS, position=(*log.tilt_position[i], *NAN4),
-            velocity=(*log.tilt_velocity[i], *NAN4), effort=(*NAN2, *log.thrust[i]))
+            ns, TILTS + THRUSTERS, position=(*log.tilt_position[i], *ABSENT4),
+            velocity=(*log.tilt_velocity[i], *ABSENT4), effort=(*ABSENT2, *log.thrust[i]))
         yield ns, CLOCK_TOPIC, m.clock(ns)
         while k < len(control_ns) and control_ns[k] <= ns:
             for topic in CONTROL_TOPICS:

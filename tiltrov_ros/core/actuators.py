@@ -84,6 +84,9 @@ class ThrusterBank:
         self._thrusts = start
         self._command = list(start)
         self.rejected = 0
+        #: Indices 0..3 of failed thrusters: they ignore their command and spin down
+        #: to zero thrust with the time constant.
+        self.failed: tuple[int, ...] = ()
         self._h = -1.0
         self._decay = 0.0
 
@@ -115,13 +118,25 @@ class ThrusterBank:
         self._command = [_clip(v, -lim, lim) for v in values]
         return True
 
+    def set_failed(self, indices: Sequence[int]) -> None:
+        """Mark thrusters (indices 0..3) failed; the others work again."""
+        failed = tuple(sorted({int(i) for i in indices}))
+        if any(i not in range(4) for i in failed):
+            raise ParameterError('failed_thrusters', f'got {list(indices)!r}; allowed: '
+                                 'indices 0..3 (thruster_1..thruster_4)')
+        self.failed = failed
+
     def step(self, h: float) -> None:
-        """Advance the thrusts by h seconds toward the held command (exact first order)."""
+        """Advance the thrusts by h seconds toward the held command (exact first order);
+        a failed thruster's target is zero."""
         if h != self._h:
             self._h = h
             self._decay = math.exp(-h / self.time_constant) if self.time_constant > 0 else 0.0
         e = self._decay
-        self._thrusts = [c + (f - c) * e for f, c in zip(self._thrusts, self._command)]
+        target = self._command
+        if self.failed:
+            target = [0.0 if i in self.failed else c for i, c in enumerate(target)]
+        self._thrusts = [c + (f - c) * e for f, c in zip(self._thrusts, target)]
 
 
 class TiltServos:

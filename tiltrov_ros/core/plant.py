@@ -257,6 +257,16 @@ class Plant:
             ok = self.servos.command(tilts) and ok
         return ok
 
+    def set_failed_thrusters(self, indices: Sequence[int]) -> None:
+        """Fail thrusters (indices 0..3; the others work): from now on they give no
+        thrust whatever their command (spinning down with the thruster time constant)."""
+        self.thrusters.set_failed(indices)
+
+    @property
+    def failed_thrusters(self) -> tuple[int, ...]:
+        """Indices 0..3 of the failed thrusters."""
+        return self.thrusters.failed
+
     def step(self, n: int = 1) -> None:
         """Advance n plant steps (see the module docstring)."""
         h = self._h

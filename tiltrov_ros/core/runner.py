@@ -30,7 +30,7 @@ The controller and allocator are anything with the methods of
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 import math
 from pathlib import Path
@@ -56,7 +56,7 @@ from tiltrov_ros.core.kinematics import quat_from_euler
 from tiltrov_ros.core.params import RobotParams, load_control_period, load_robot_params
 from tiltrov_ros.core.plant import Plant, PlantSample
 from tiltrov_ros.core.runlog import RunLog
-from tiltrov_ros.core.scenarios import Scenario, load_scenario
+from tiltrov_ros.core.scenarios import Scenario, ThrusterFault, failed_at, load_scenario
 from tiltrov_ros.core.timebase import seconds, to_ns
 
 FloatArray = NDArray[np.float64]
@@ -131,7 +131,10 @@ def run(plant: Plant, controller: ControllerLike, allocator: AllocatorLike,
         reference_fn: ReferenceFn, duration: float, *,
         control_period_ns: int = DEFAULT_CONTROL_PERIOD_NS,
         progress: Callable[[float], None] | None = None,
-        meta: Mapping[str, Any] | None = None) -> RunLog:
+        meta: Mapping[str, Any] | None = None,
+        faults: Sequence[ThrusterFault] = (),
+        rebuild_allocator: Callable[[tuple[int, ...]], AllocatorLike] | None = None
+        ) -> RunLog:
     """Run the closed loop for ``duration`` seconds from the plant's present state.
 
     Parameters
@@ -151,6 +154,11 @@ def run(plant: Plant, controller: ControllerLike, allocator: AllocatorLike,
         with 1.0 at the end.
     meta : mapping, optional
         Added to the RunLog's meta (scenario, controller name, ...).
+    faults : sequence of ThrusterFault, optional
+        Thrusters failing during the run: the plant's at ``at``; at the first
+        control tick from ``at + detected_after`` the allocator is replaced by
+        ``rebuild_allocator(failed indices)`` (``previous`` kept), as a fault
+        detector would tell the ``thrust_allocator`` node (``failed_thrusters``).
 
     Returns
     -------
@@ -178,9 +186,19 @@ def run(plant: Plant, controller: ControllerLike, allocator: AllocatorLike,
         'thrust_cmd', 'tilt_cmd', 'wrench_achieved')}
     infeasible = 0
     previous: Any = None
+    known: tuple[int, ...] = ()
     for i in range(n_steps):
+        if faults:
+            failed = failed_at(faults, seconds(plant.time_ns))
+            if failed != plant.failed_thrusters:
+                plant.set_failed_thrusters(failed)
         if i % ticks_every == 0:
             t = seconds(plant.time_ns)
+            if faults and rebuild_allocator is not None:
+                detected = failed_at(faults, t, detected=True)
+                if detected != known:
+                    known = detected
+                    allocator = rebuild_allocator(known)
             p, q, v = reference_fn(t)
             reference = Reference(_vector(p, 3, 'reference position'),
                                   _vector(q, 4, 'reference quaternion'),
@@ -219,6 +237,9 @@ def run(plant: Plant, controller: ControllerLike, allocator: AllocatorLike,
                     infeasible_ticks=infeasible,
                     rejected_thrust_commands=plant.thrusters.rejected,
                     rejected_tilt_commands=plant.servos.rejected)
+    if faults:
+        run_meta['faults'] = [{'thruster': f.index + 1, 'at': f.at,
+                               'detected_after': f.detected_after} for f in faults]
     run_meta.update(meta or {})
     return _runlog(samples, rows, run_meta)
 
@@ -292,8 +313,8 @@ class StackConfig:
     def build_controller(self) -> Controller:
         return make_controller(self.controller, self.robot)
 
-    def build_allocator(self) -> ThrustAllocator:
-        return self.allocator.build(self.robot, self.control_period)
+    def build_allocator(self, failed_thrusters: Sequence[int] = ()) -> ThrustAllocator:
+        return self.allocator.build(self.robot, self.control_period, failed_thrusters)
 
     def describe(self) -> dict[str, Any]:
         """JSON-serialisable run description for RunLog.meta and bags."""
@@ -346,4 +367,5 @@ def run_scenario(config: StackConfig, *, duration: float | None = None,
     return run(plant, config.build_controller(), config.build_allocator(),
                profile.at, config.scenario.duration if duration is None else duration,
                control_period_ns=config.control_period_ns, progress=progress,
-               meta=config.describe())
+               meta=config.describe(), faults=config.scenario.faults,
+               rebuild_allocator=config.build_allocator)

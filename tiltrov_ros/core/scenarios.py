@@ -25,6 +25,9 @@ A scenario file (``config/scenarios/<name>.yaml``, or any path) is plain YAML::
       nu: [0, 0, 0, 0, 0, 0]          # body velocity
     robot:                            # overrides of config/robot.yaml
       tilt_rate_limit: 1.0471975511965976
+    faults:                           # actuator faults (README.md, "Reliability")
+      - {thruster: 2, at: 20.0, detected_after: 0.0}   # thruster_2 gives no thrust from
+                                      # 20 s; the allocator knows from 20 s + detected_after
 
 DOFs not listed in ``reference`` are held at 0. Term types (``t`` is the
 scenario time, s):
@@ -152,6 +155,27 @@ class InitialState:
 
 
 @dataclass(frozen=True)
+class ThrusterFault:
+    """Thruster ``index`` (0..3: thruster_1..4) fails at ``at`` s; the allocator is
+    told ``detected_after`` s later (it allocates without it from then on)."""
+
+    index: int
+    at: float
+    detected_after: float = 0.0
+
+    @property
+    def detected_at(self) -> float:
+        return self.at + self.detected_after
+
+
+def failed_at(faults: Sequence[ThrusterFault], t: float, *, detected: bool = False
+              ) -> tuple[int, ...]:
+    """Indices of the thrusters failed (``detected``: known to the allocator) at ``t`` s."""
+    return tuple(sorted({f.index for f in faults
+                         if t >= (f.detected_at if detected else f.at)}))
+
+
+@dataclass(frozen=True)
 class Scenario:
     """A named run: reference, duration, disturbances, initial state, robot overrides."""
 
@@ -163,6 +187,7 @@ class Scenario:
     robot_overrides: tuple[tuple[str, Any], ...] = ()
     description: str = ''
     source: str | None = field(default=None, compare=False)
+    faults: tuple[ThrusterFault, ...] = ()
 
     def robot(self, base: RobotParams) -> RobotParams:
         """``base`` with this scenario's overrides applied (validated again)."""
@@ -263,7 +288,7 @@ def _term(doc: Any, scale: float, source: str | None, where: str) -> Term:
 
 def _parse(doc: Mapping[str, Any], source: str | None) -> Scenario:
     _check_keys(doc, {'name', 'description', 'duration', 'angle_unit', 'reference',
-                      'disturbances', 'initial_state', 'robot'}, source, 'top level')
+                      'disturbances', 'initial_state', 'robot', 'faults'}, source, 'top level')
     name = str(doc.get('name') or (Path(source).stem if source else 'scenario'))
     if 'duration' not in doc:
         raise _fail(source, 'duration', 'missing (seconds of simulated time)')
@@ -339,4 +364,27 @@ def _parse(doc: Mapping[str, Any], source: str | None) -> Scenario:
                                      'of config/robot.yaml')
     return Scenario(name, duration, ReferenceProfile(tuple(terms)), disturbances,
                     initial, tuple(sorted(robot.items())), str(doc.get('description', '')),
-                    source)
+                    source, _faults(doc.get('faults', []) or [], source))
+
+
+def _faults(doc: Any, source: str | None) -> tuple[ThrusterFault, ...]:
+    if not isinstance(doc, Sequence) or isinstance(doc, str):
+        raise _fail(source, 'faults', 'must be a list of {thruster, at, detected_after}')
+    out = []
+    for i, entry in enumerate(doc):
+        where = f'faults[{i}]'
+        if not isinstance(entry, Mapping):
+            raise _fail(source, where, f'expected a mapping, got {entry!r}')
+        _check_keys(entry, {'thruster', 'at', 'detected_after'}, source, where)
+        number = entry.get('thruster')
+        if isinstance(number, bool) or number not in (1, 2, 3, 4):
+            raise _fail(source, f'{where}.thruster', f'got {number!r}; allowed: 1, 2, 3, 4 '
+                                                     '(thruster_1..thruster_4)')
+        if 'at' not in entry:
+            raise _fail(source, where, "needs 'at' (s)")
+        at = _float(entry['at'], source, f'{where}.at')
+        after = _float(entry.get('detected_after', 0.0), source, f'{where}.detected_after')
+        if at < 0 or after < 0:
+            raise _fail(source, where, 'at and detected_after must be >= 0 s')
+        out.append(ThrusterFault(int(number) - 1, at, after))
+    return tuple(out)

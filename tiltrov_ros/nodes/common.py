@@ -10,6 +10,7 @@ headless runner bit for bit (ARCHITECTURE.md, "Time and stamps").
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Callable, Iterable, Mapping, Sequence
 import functools
 import math
@@ -34,7 +35,11 @@ import rclpy
 from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
 from rclpy.context import Context
-from rclpy.exceptions import ParameterException
+from rclpy.exceptions import (
+    InvalidParameterTypeException,
+    InvalidParameterValueException,
+    ParameterException,
+)
 from rclpy.executors import (
     Executor,
     ExternalShutdownException,
@@ -52,10 +57,13 @@ from rclpy.qos import (
 )
 from rclpy.task import Future
 from sensor_msgs.msg import JointState
+import yaml
 
+from tiltrov_ros.core import validation
 from tiltrov_ros.core.errors import ParameterError, TiltrovError
 from tiltrov_ros.core.params import RobotParams, load_control_period, load_robot_params
 from tiltrov_ros.core.timebase import NS_PER_S, ns_to_stamp
+from tiltrov_ros.core.validation import InvalidInput, StampBounds
 
 FloatArray = NDArray[np.float64]
 
@@ -239,21 +247,17 @@ def new_wrench() -> WrenchStamped:
     return msg
 
 
-def joint_values(msg: JointState, names: Sequence[str], field: str) -> list[float] | None:
-    """Values of ``field`` (position, velocity or effort) for ``names``, by name.
+def joint_state_values(msg: JointState, required: Sequence[str], field: str,
+                       allowed: Sequence[str] | None = None) -> list[float]:
+    """Values of ``field`` (position, velocity or effort) for ``required``, by name.
 
-    None when a name is missing, the array is too short or a value is not
-    finite: the caller rejects the whole message.
+    Checked by :func:`tiltrov_ros.core.validation.joint_values`: raises
+    :class:`~tiltrov_ros.core.validation.InvalidInput` for an unknown, missing or
+    repeated joint, an array of the wrong length or a non-finite value.
     """
-    values = getattr(msg, field)
-    index = {name: i for i, name in enumerate(msg.name)}
-    out = []
-    for name in names:
-        i = index.get(name)
-        if i is None or i >= len(values):
-            return None
-        out.append(float(values[i]))
-    return out if _finite(out) else None
+    return validation.joint_values(
+        list(msg.name), {'position': msg.position, 'velocity': msg.velocity,
+                         'effort': msg.effort}, required, field, allowed)
 
 
 def fill_joint_state(msg: JointState, ns: int, *, position: Sequence[float] = (),
@@ -269,6 +273,54 @@ def new_joint_state(names: Sequence[str]) -> JointState:
     msg = JointState()
     msg.name = list(names)
     return msg
+
+
+# --------------------------------------------------------------------------- outgoing values
+
+
+def _all_finite(*groups: Iterable[float]) -> bool:
+    return all(all(map(math.isfinite, group)) for group in groups)
+
+
+def _odometry_finite(m: Odometry) -> bool:
+    p, o = m.pose.pose.position, m.pose.pose.orientation
+    lin, ang = m.twist.twist.linear, m.twist.twist.angular
+    return (_all_finite((p.x, p.y, p.z, o.x, o.y, o.z, o.w, lin.x, lin.y, lin.z,
+                         ang.x, ang.y, ang.z))
+            and bool(np.isfinite(m.pose.covariance).all())
+            and bool(np.isfinite(m.twist.covariance).all()))
+
+
+def _joint_state_finite(m: JointState) -> bool:
+    return _all_finite(m.position, m.velocity, m.effort)
+
+
+def _wrench_finite(m: WrenchStamped) -> bool:
+    f, t = m.wrench.force, m.wrench.torque
+    return _all_finite((f.x, f.y, f.z, t.x, t.y, t.z))
+
+
+def _pose_finite(m: PoseStamped) -> bool:
+    p, o = m.pose.position, m.pose.orientation
+    return _all_finite((p.x, p.y, p.z, o.x, o.y, o.z, o.w))
+
+
+def _twist_finite(m: TwistStamped) -> bool:
+    lin, ang = m.twist.linear, m.twist.angular
+    return _all_finite((lin.x, lin.y, lin.z, ang.x, ang.y, ang.z))
+
+
+#: Message type -> "every float field is finite" (types without floats are not listed).
+FINITE_CHECKS: dict[type, Callable[[Any], bool]] = {
+    Odometry: _odometry_finite, JointState: _joint_state_finite,
+    WrenchStamped: _wrench_finite, PoseStamped: _pose_finite, TwistStamped: _twist_finite,
+}
+
+
+def message_is_finite(msg: Any) -> bool:
+    """True when no float field of ``msg`` is NaN or infinite (types of the stack)."""
+    check = FINITE_CHECKS.get(type(msg))
+    return True if check is None else check(msg)
 
 
 # --------------------------------------------------------------------------- parameters
@@ -310,6 +362,65 @@ _ROBOT_DOC: dict[str, tuple[str, tuple[float, float] | None]] = {
     'tilt_max': ('upper servo angle limit, rad', (-math.pi, math.pi)),
     'tilt_rate_limit': ('servo rate limit, rad/s (> 0)', (0.0, math.inf)),
 }
+
+
+def allowed_text(d: ParameterDescriptor | None, default: Any) -> str:
+    """What a parameter accepts, from its descriptor and default (for error messages)."""
+    kind = {bool: 'true or false', int: 'an integer', float: 'a number', str: 'a string',
+            list: 'a list'}.get(type(default), 'a value of the declared type')
+    parts = [kind]
+    if d is not None:
+        for r in d.floating_point_range:
+            parts.append(f'in [{r.from_value:g}, {r.to_value:g}]')
+        for r in d.integer_range:
+            parts.append(f'in [{r.from_value}, {r.to_value}]')
+        if d.additional_constraints:
+            parts.append(f'({d.additional_constraints})')
+    return ' '.join(parts)
+
+
+def _flatten(doc: Any, prefix: str = '') -> set[str]:
+    names: set[str] = set()
+    if isinstance(doc, Mapping):
+        for key, value in doc.items():
+            names |= _flatten(value, f'{prefix}{key}.') if isinstance(value, Mapping) else {
+                f'{prefix}{key}'}
+    return names
+
+
+def parameter_source(name: str, node_name: str, args: Sequence[str]) -> str | None:
+    """The last ``--params-file`` in ``args`` that sets ``name`` (or ``robot.<name>``)
+    for ``node_name`` or ``/**``; None when no file does (an override, ``-p``)."""
+    files = [args[i + 1] for i, a in enumerate(args[:-1]) if a == '--params-file']
+    for path in reversed(files):
+        try:
+            with open(path, encoding='utf-8') as stream:
+                doc = yaml.safe_load(stream)
+        except (OSError, yaml.YAMLError):
+            continue
+        if not isinstance(doc, Mapping):
+            continue
+        for key, section in doc.items():
+            key = str(key)
+            if key not in ('/**', '**', node_name) and not key.endswith(f'/{node_name}'):
+                continue
+            params = section.get('ros__parameters') if isinstance(section, Mapping) else None
+            names = _flatten(params)
+            if name in names or f'robot.{name}' in names:
+                return str(path)
+    return None
+
+
+def declare_failed_thrusters(node: Node) -> tuple[int, ...]:
+    """Declare ``failed_thrusters`` (thruster numbers 1..4, run-time changeable) and
+    return the core indices (0..3). Validated by
+    :func:`tiltrov_ros.core.validation.failed_thruster_indices`."""
+    d = descriptor('thrusters that give no thrust, by number: 1..4 = thruster_1..thruster_4 '
+                   '(e.g. [2]); [] none; settable at run time',
+                   constraints='distinct integers 1..4')
+    d.dynamic_typing = True     # [] has no element type
+    value = node.declare_parameter('failed_thrusters', [], d).value
+    return validation.failed_thruster_indices(value)
 
 
 def declare_robot(node: Node) -> tuple[RobotParams, float]:
@@ -361,6 +472,15 @@ def as_parameters(overrides: Overrides) -> list[Parameter]:
 F = TypeVar('F', bound=Callable[..., Any])
 
 
+def _callback_failed(node: TiltrovNode, name: str, exc: Exception) -> None:
+    node.callback_errors += 1
+    try:
+        node.on_callback_error(name, exc)
+    except Exception as inner:  # even the error handler must not escape
+        node.get_logger().error(f'error handler failed: {inner!r}',
+                                throttle_duration_sec=THROTTLE)
+
+
 def guarded(method: F) -> F:
     """Wrap a callback so an exception is logged and counted, never raised.
 
@@ -374,19 +494,81 @@ def guarded(method: F) -> F:
         try:
             return method(self, *args)
         except Exception as exc:  # the executor must survive anything a callback does
-            self.callback_errors += 1
-            try:
-                self.on_callback_error(method.__name__, exc)
-            except Exception as inner:  # even the error handler must not escape
-                self.get_logger().error(f'error handler failed: {inner!r}',
-                                        throttle_duration_sec=THROTTLE)
+            _callback_failed(self, method.__name__, exc)
             return None
 
     return wrapper  # type: ignore[return-value]
 
 
+def input_callback(topic: str) -> Callable[[F], F]:
+    """Decorate the subscription callback of ``topic``: validation plus :func:`guarded`.
+
+    An :class:`~tiltrov_ros.core.validation.InvalidInput` raised inside is a
+    rejection of the message (:meth:`TiltrovNode.reject_input`: counted per
+    topic and reason, logged, and :meth:`TiltrovNode.on_rejected` may publish a
+    safe answer); any other exception is a callback error, as in :func:`guarded`.
+    """
+
+    def decorate(method: F) -> F:
+        @functools.wraps(method)
+        def wrapper(self: TiltrovNode, msg: Any) -> Any:
+            self._input_stamp = None
+            try:
+                return method(self, msg)
+            except InvalidInput as bad:
+                try:
+                    self.reject_input(topic, bad, self._input_stamp)
+                except Exception as exc:
+                    _callback_failed(self, method.__name__, exc)
+            except Exception as exc:  # the executor must survive anything a callback does
+                _callback_failed(self, method.__name__, exc)
+            return None
+
+        return wrapper  # type: ignore[return-value]
+
+    return decorate
+
+
+class SafePublisher:
+    """A publisher that never sends NaN or infinity (README.md, "Reliability").
+
+    A message with a non-finite float is not published: the node counts it
+    (``unsafe_outputs`` on /diagnostics, ERROR level), logs it, and publishes
+    what ``safe(msg)`` returns instead (the node's safe command), if anything.
+    ``published`` counts the messages sent.
+    """
+
+    def __init__(self, node: TiltrovNode, msg_type: Any, topic: str, qos: QoSProfile,
+                 safe: Callable[[Any], Any | None] | None = None) -> None:
+        self.node = node
+        self.topic = topic
+        self.publisher = node.create_publisher(msg_type, topic, qos)
+        self._safe = safe
+        self.published = 0
+
+    def publish(self, msg: Any) -> bool:
+        """Publish ``msg`` if it is finite, else its safe replacement; True if ``msg`` went."""
+        if message_is_finite(msg):
+            self.publisher.publish(msg)
+            self.published += 1
+            return True
+        self.node.unsafe_output(self.topic)
+        replacement = self._safe(msg) if self._safe is not None else None
+        if replacement is not None and message_is_finite(replacement):
+            self.publisher.publish(replacement)
+            self.published += 1
+        return False
+
+    def get_subscription_count(self) -> int:
+        return int(self.publisher.get_subscription_count())
+
+    def wait_for_all_acked(self, timeout: Any) -> bool:
+        return bool(self.publisher.wait_for_all_acked(timeout))
+
+
 class TiltrovNode(Node):
-    """Base of the stack nodes: construction options, diagnostics, error handling.
+    """Base of the stack nodes: construction options, diagnostics, error handling,
+    input validation and guarded publishers.
 
     Parameters
     ----------
@@ -408,11 +590,37 @@ class TiltrovNode(Node):
         super().__init__(node_name, namespace=namespace, context=context,
                          cli_args=list(cli_args) if cli_args is not None else None,
                          parameter_overrides=as_parameters(parameter_overrides))
+        #: Where parameter files are named (error messages say which file set a value).
+        self._source_args = [*(cli_args or ()), *sys.argv]
         self.callback_errors = 0
         self.steady = steady_clock()
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS,
                                                       RELIABLE_QOS)
         self._diagnostics_msg = DiagnosticArray()
+        #: (topic, reason) -> messages rejected (see core/validation.py).
+        self.rejections: Counter[tuple[str, str]] = Counter()
+        #: topic -> outgoing messages withheld for a non-finite value.
+        self.unsafe: Counter[str] = Counter()
+        self.stamp_bounds = StampBounds()
+        self._input_stamp: int | None = None
+        self._reject_log: dict[tuple[str, str], tuple[int, int]] = {}
+        self._rejected_at_last_report = 0
+        self._safe_publishers: list[SafePublisher] = []
+
+    def declare_parameter(self, name: str, value: Any = None,
+                          descriptor: ParameterDescriptor | None = None,
+                          ignore_override: bool = False) -> Parameter:
+        """rclpy's, but a value of the wrong type or out of range (from a parameter
+        file or an override) raises :class:`ParameterError` naming the parameter, the
+        value, the allowed range and the file it came from."""
+        try:
+            return super().declare_parameter(name, value, descriptor, ignore_override)
+        except (InvalidParameterTypeException, InvalidParameterValueException) as exc:
+            given = getattr(self, '_parameter_overrides', {}).get(name)
+            got = given.value if given is not None else value
+            raise ParameterError(
+                name, f'got {got!r}; allowed: {allowed_text(descriptor, value)}',
+                source=parameter_source(name, self.get_name(), self._source_args)) from exc
 
     # -- hooks for subclasses ---------------------------------------------------
 
@@ -423,6 +631,134 @@ class TiltrovNode(Node):
     def on_callback_error(self, callback: str, exc: Exception) -> None:
         """Called when a callback raised; subclasses publish a safe command too."""
         self.get_logger().error(f'{callback} failed: {exc!r}', throttle_duration_sec=THROTTLE)
+
+    def on_rejected(self, topic: str, bad: InvalidInput, stamp: int | None) -> None:
+        """Called after a message of ``topic`` was rejected; ``stamp`` is its stamp (ns)
+        when the stamp itself was valid, else None. Subclasses answer a rejected
+        tick with their safe command here."""
+
+    # -- input validation -------------------------------------------------------
+
+    def declare_stamp_bounds(self) -> None:
+        """Declare ``stamp_max_future`` and ``stamp_max_age`` (s, run-time changeable)."""
+        future = self.declare_parameter('stamp_max_future', 0.5, descriptor(
+            'input stamps more than this ahead of the node\'s clock are rejected, s (sim time: '
+            '/clock, the plant its own; not checked on system time); 0: not checked',
+            floating=(0.0, 1e6))).value
+        age = self.declare_parameter('stamp_max_age', 5.0, descriptor(
+            'input stamps more than this behind the node\'s clock are rejected, s; '
+            '0: not checked', floating=(0.0, 1e9))).value
+        self.stamp_bounds = StampBounds.from_seconds(future, age)
+        self.add_post_set_parameters_callback(self._apply_stamp_bounds)
+
+    def _apply_stamp_bounds(self, parameters: list[Parameter]) -> None:
+        if any(p.name in ('stamp_max_future', 'stamp_max_age') for p in parameters):
+            self.stamp_bounds = StampBounds.from_seconds(
+                self.get_parameter('stamp_max_future').value,
+                self.get_parameter('stamp_max_age').value)
+
+    # -- watchdogs ---------------------------------------------------------------
+
+    def declare_timeout(self, name: str, default: float, text: str) -> float:
+        """Declare a watchdog timeout ``name`` (s, run-time changeable, 0: off)."""
+        value = self.declare_parameter(name, default, descriptor(
+            f'{text}, s; on sim time measured on /clock, else wall time since the message '
+            'arrived; 0: off', floating=(0.0, 3600.0))).value
+        return float(value)
+
+    def input_age_ns(self, stamp: int, received: int) -> int:
+        """How old an input stamped ``stamp`` that arrived at steady time ``received`` is:
+        on sim time, by ``/clock`` (0 before the first one: sim time is not running);
+        on system time, the wall time since it arrived."""
+        if self.on_sim_time():
+            now = self.clock_ns()
+            return 0 if now is None else now - stamp
+        return self.steady_ns() - received
+
+    def on_sim_time(self) -> bool:
+        return bool(getattr(self.get_clock(), 'ros_time_is_active', False))
+
+    def estimated_now_ns(self, stamp: int, received: int, period: int) -> int:
+        """The stamp for a watchdog's output: sim time now on /clock, else ``stamp``
+        plus the wall time since it arrived; after ``stamp``, and never a multiple of
+        ``period`` (a control tick), so that no answer to a real tick, which downstream
+        nodes cache by stamp, is ever confused with it."""
+        now = self.clock_ns()
+        if now is None:
+            now = stamp + self.steady_ns() - received
+        now = max(now, stamp + 1)
+        return now + 1 if now % period == 0 else now
+
+    def clock_ns(self) -> int | None:
+        """The clock input stamps are checked against, ns: sim time when the node
+        runs on ``/clock`` (``use_sim_time``, as ``tiltrov launch`` starts it).
+
+        None (stamps not checked against a clock) on system time, and on sim time
+        before the first ``/clock`` message (ROS time 0 means "not initialised"):
+        the stack stamps with sim time, which the wall clock says nothing about.
+        """
+        clock = self.get_clock()
+        if not getattr(clock, 'ros_time_is_active', False):
+            return None
+        ns = int(clock.now().nanoseconds)
+        return ns if ns > 0 else None
+
+    def check_header(self, header: Any, frame: str | None) -> int:
+        """The header's stamp (ns), checked against :meth:`clock_ns` and
+        :attr:`stamp_bounds`, then its ``frame_id`` against ``frame`` (None: any).
+
+        Raises InvalidInput. Once the stamp is known to be valid, a later
+        rejection of the same message passes it to :meth:`on_rejected`.
+        """
+        ns = validation.check_stamp(header.stamp.sec, header.stamp.nanosec, self.clock_ns(),
+                                    self.stamp_bounds)
+        self._input_stamp = ns
+        if frame is not None:
+            validation.check_frame(header.frame_id, frame)
+        return ns
+
+    def reject_input(self, topic: str, bad: InvalidInput, stamp: int | None = None) -> None:
+        """Count a rejected message of ``topic``, log it (at most once per THROTTLE
+        seconds per topic and reason, with the number left unlogged), and call
+        :meth:`on_rejected`."""
+        key = (topic, bad.reason)
+        self.rejections[key] += 1
+        now = self.steady_ns()
+        last, quiet = self._reject_log.get(key, (None, 0))
+        if last is None or now - last >= THROTTLE * NS_PER_S:
+            more = f' ({quiet} more since the last report)' if quiet else ''
+            self.get_logger().warning(f'rejected a {topic} message ({bad.reason}): '
+                                      f'{bad.detail}{more}')
+            self._reject_log[key] = (now, 0)
+        else:
+            self._reject_log[key] = (last, quiet + 1)
+        self.on_rejected(topic, bad, stamp)
+
+    @property
+    def rejected_messages(self) -> int:
+        """Messages rejected so far, every topic and reason."""
+        return sum(self.rejections.values())
+
+    # -- output guard -----------------------------------------------------------
+
+    def create_safe_publisher(self, msg_type: Any, topic: str, qos: QoSProfile,
+                              safe: Callable[[Any], Any | None] | None = None
+                              ) -> SafePublisher:
+        """A :class:`SafePublisher`: never NaN or infinity on ``topic``."""
+        pub = SafePublisher(self, msg_type, topic, qos, safe)
+        self._safe_publishers.append(pub)
+        return pub
+
+    def unsafe_output(self, topic: str) -> None:
+        """Count and log an outgoing message withheld for a non-finite value."""
+        self.unsafe[topic] += 1
+        self.get_logger().error(f'withheld a {topic} message with a non-finite value '
+                                f'({self.unsafe[topic]} so far); publishing the safe command',
+                                throttle_duration_sec=THROTTLE)
+
+    def published_counts(self) -> dict[str, int]:
+        """Messages published per topic by the guarded publishers."""
+        return {pub.topic: pub.published for pub in self._safe_publishers}
 
     # -- helpers ----------------------------------------------------------------
 
@@ -436,10 +772,25 @@ class TiltrovNode(Node):
     @guarded
     def publish_diagnostics(self) -> None:
         level, message, values = self.diagnostic_status()
-        if self.callback_errors:
+        rejected = self.rejected_messages
+        if rejected > self._rejected_at_last_report:
+            level = max(level, WARN)
+            message = (f'{message}; {rejected - self._rejected_at_last_report} input '
+                       'message(s) rejected')
+        self._rejected_at_last_report = rejected
+        unsafe = sum(self.unsafe.values())
+        if self.callback_errors or unsafe:
             level = max(level, ERROR)
+        if self.callback_errors:
             message = f'{message}; {self.callback_errors} callback error(s)'
-        values = {**values, 'callback_errors': self.callback_errors}
+        if unsafe:
+            message = f'{message}; {unsafe} non-finite output(s) withheld'
+        values = {**values, 'callback_errors': self.callback_errors,
+                  'rejected_messages': rejected}
+        values.update({f'rejected.{topic}.{reason}': n
+                       for (topic, reason), n in sorted(self.rejections.items())})
+        values.update({f'unsafe_outputs.{topic}': n for topic, n in sorted(self.unsafe.items())})
+        values.update({f'published.{topic}': n for topic, n in self.published_counts().items()})
         status = DiagnosticStatus(
             level=bytes([level]), name=f'{self.get_fully_qualified_name()}',
             message=message, hardware_id='tiltrov',
@@ -550,7 +901,13 @@ def main_loop(factory: Callable[[], TiltrovNode], args: list[str] | None, name: 
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except STARTUP_ERRORS as exc:
-        print(f'{name}: {exc}', file=sys.stderr, flush=True)
+        text = str(exc)
+        if isinstance(exc, ParameterError) and exc.source is None:
+            source = parameter_source(exc.name, name, list(args or sys.argv))
+            prefix = f'parameter {exc.name!r}'
+            if source and text.startswith(prefix):
+                text = f'{prefix} (in {source}){text[len(prefix):]}'
+        print(f'{name}: {text}', file=sys.stderr, flush=True)
         code = 1
     finally:
         if executor is not None:

@@ -36,11 +36,11 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
-import math
 import sys
 from typing import Any
 
 from nav_msgs.msg import Odometry
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.duration import Duration
 from rclpy.parameter import Parameter
 from rclpy.task import Future
@@ -52,8 +52,16 @@ from tiltrov_ros.core.errors import ParameterError
 from tiltrov_ros.core.kinematics import quat_from_euler
 from tiltrov_ros.core.params import RobotParams
 from tiltrov_ros.core.plant import Plant
-from tiltrov_ros.core.scenarios import InitialState, Scenario, load_scenario
+from tiltrov_ros.core.scenarios import (
+    InitialState,
+    Scenario,
+    ThrusterFault,
+    failed_at,
+    load_scenario,
+)
 from tiltrov_ros.core.timebase import seconds, to_ns
+from tiltrov_ros.core.validation import InvalidInput, failed_thruster_indices
+from tiltrov_ros.core.validation import stamp_ns as checked_stamp_ns
 
 from .common import (
     CLOCK,
@@ -72,22 +80,25 @@ from .common import (
     WARN,
     Overrides,
     TiltrovNode,
+    declare_failed_thrusters,
     declare_robot,
     descriptor,
     fill_joint_state,
     fill_odometry,
     format_ns,
     guarded,
-    joint_values,
+    input_callback,
+    joint_state_values,
     main_loop,
     new_joint_state,
     new_odometry,
     set_stamp,
-    stamp_ns,
 )
 
 NODE_NAME = 'plant_simulator'
-NAN = math.nan
+#: joint_states value of a field a joint does not have (thruster position and
+#: velocity, servo effort): 0.0, since no topic carries NaN (README.md, "Reliability").
+NO_VALUE = 0.0
 #: s (wall): how often the lockstep watchdog looks at the start-up and stall state.
 WATCHDOG_PERIOD = 0.05
 #: s (wall): re-publication period of the initial state until the first commands come.
@@ -118,6 +129,9 @@ class PlantConfig:
     stall_timeout: float             # s, wall
     startup_subscribers: int
     startup_delay: float             # s, wall
+    command_timeout: float = 0.5     # s, sim time; 0: off
+    failed_thrusters: tuple[int, ...] = ()          # indices 0..3 (parameter)
+    faults: tuple[ThrusterFault, ...] = ()          # the scenario's
 
     def build_plant(self) -> Plant:
         """The plant at the initial state, as ``StackConfig.build_plant`` makes it."""
@@ -167,6 +181,12 @@ def declare_parameters(node: TiltrovNode) -> PlantConfig:
         'wall seconds to wait once the readers are there, so that every other '
         'pair of endpoints (e.g. a bag recorder and the allocator) is matched too',
         read_only=True, floating=(0.0, 60.0))).value
+    command_timeout = d('command_timeout', 0.5, descriptor(
+        'realtime: sim seconds without a thrust_cmd after which the thrusters are '
+        'commanded to zero (tilts held) until commands return; 0: off',
+        floating=(0.0, 3600.0))).value
+    failed = declare_failed_thrusters(node)
+    node.declare_stamp_bounds()
     robot, period = declare_robot(node)
     node.check_overrides()
 
@@ -194,7 +214,8 @@ def declare_parameters(node: TiltrovNode) -> PlantConfig:
         initial_state=scenario.initial_state if scenario is not None else InitialState(),
         scenario=scenario_name, duration_ns=duration_ns, exit_at_end=bool(exit_at_end),
         stall_timeout=float(stall_timeout), startup_subscribers=int(startup_subscribers),
-        startup_delay=float(startup_delay))
+        startup_delay=float(startup_delay), command_timeout=float(command_timeout),
+        failed_thrusters=failed, faults=scenario.faults if scenario is not None else ())
 
 
 class PlantSimulator(TiltrovNode):
@@ -211,9 +232,10 @@ class PlantSimulator(TiltrovNode):
         #: Completes (result: final sim time, ns) when ``duration`` is reached.
         self.finished: Future = Future()
 
-        self._odom_pub = self.create_publisher(Odometry, ODOM, RELIABLE_QOS)
-        self._joint_pub = self.create_publisher(JointState, JOINT_STATES, RELIABLE_QOS)
-        self._clock_pub = self.create_publisher(ClockMsg, CLOCK, RELIABLE_QOS)
+        # Guarded: a non-finite state (a diverged integration) is withheld and counted.
+        self._odom_pub = self.create_safe_publisher(Odometry, ODOM, RELIABLE_QOS)
+        self._joint_pub = self.create_safe_publisher(JointState, JOINT_STATES, RELIABLE_QOS)
+        self._clock_pub = self.create_safe_publisher(ClockMsg, CLOCK, RELIABLE_QOS)
         self._odom_msg = new_odometry()
         self._joint_msg = new_joint_state(TILTS + THRUSTERS)
         self._clock_msg = ClockMsg()
@@ -229,10 +251,13 @@ class PlantSimulator(TiltrovNode):
         self._waiting_since: int | None = None     # steady ns, while waiting at a tick
         self._stalled = False                      # the present wait is a stall
         self._last_applied = [-1, -1]              # realtime: stamps of the held commands
+        self._last_thrust_at: int | None = None    # realtime: sim ns of the last thrust_cmd
+        self.commands_stale = False
+        self.stale_events = 0
+        self._update_failed()
         self.stalls = 0
         self.startup_retries = 0
         self.republished = 0
-        self.rejected_messages = 0
         self.overruns = 0
         self._diag_mark = (self.steady_ns(), self.plant.time_ns)
         self._rtf_achieved = 0.0
@@ -240,6 +265,7 @@ class PlantSimulator(TiltrovNode):
         self._step_timer = None
         self._watchdog_timer = self.create_timer(WATCHDOG_PERIOD, self._watchdog,
                                                  clock=self.steady)
+        self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
         self.start_diagnostics()
         c = self.config
@@ -258,9 +284,9 @@ class PlantSimulator(TiltrovNode):
         self._odom_pub.publish(fill_odometry(self._odom_msg, ns, s.position, s.quaternion,
                                              s.nu))
         fill_joint_state(self._joint_msg, ns,
-                         position=(*s.tilts, NAN, NAN, NAN, NAN),
-                         velocity=(*s.tilt_velocities, NAN, NAN, NAN, NAN),
-                         effort=(NAN, NAN, *s.thrusts))
+                         position=(*s.tilts, NO_VALUE, NO_VALUE, NO_VALUE, NO_VALUE),
+                         velocity=(*s.tilt_velocities, NO_VALUE, NO_VALUE, NO_VALUE, NO_VALUE),
+                         effort=(NO_VALUE, NO_VALUE, *s.thrusts))
         self._joint_pub.publish(self._joint_msg)
         set_stamp(self._clock_msg.clock, ns)
         self._clock_pub.publish(self._clock_msg)
@@ -281,37 +307,54 @@ class PlantSimulator(TiltrovNode):
 
     # -- commands in ---------------------------------------------------------------
 
-    @guarded
+    def clock_ns(self) -> int | None:
+        """The plant's clock is its own sim time (stamp bounds are relative to it)."""
+        return self.plant.time_ns
+
+    @input_callback(THRUST_CMD)
     def _on_thrust_cmd(self, msg: JointState) -> None:
         self._on_command(0, msg, THRUSTERS, 'effort')
 
-    @guarded
+    @input_callback(TILT_CMD)
     def _on_tilt_cmd(self, msg: JointState) -> None:
         self._on_command(1, msg, TILTS, 'position')
 
     def _on_command(self, kind: int, msg: JointState, names: tuple[str, ...],
                     field: str) -> None:
-        ns = stamp_ns(msg.header.stamp)
-        values = joint_values(msg, names, field)
-        if values is None:
-            self.rejected_messages += 1
-            self.get_logger().warning(
-                f'rejected a {("thrust_cmd", "tilt_cmd")[kind]} stamped {format_ns(ns)}: '
-                f'needs finite {field} for {", ".join(names)}; the previous command holds',
-                throttle_duration_sec=THROTTLE)
         self._commands_seen = True
+        stamp = msg.header.stamp
+        if self.lockstep and (checked_stamp_ns(stamp.sec, stamp.nanosec) < self.plant.time_ns
+                              or self.finished.done()):
+            return   # a re-published answer to a tick already passed
+        ns = self.check_header(msg.header, None)
+        values = joint_state_values(msg, names, field)
         if not self.lockstep:
-            if values is not None and ns >= self._last_applied[kind]:
+            if ns >= self._last_applied[kind]:
                 self._last_applied[kind] = ns
                 self._command(kind, values)
+                if kind == 0:
+                    self._last_thrust_at = self.plant.time_ns
+                    if self.commands_stale:
+                        self.commands_stale = False
+                        self.get_logger().info(f'thrust_cmd again (stamped {format_ns(ns)}): '
+                                               'commands resume')
             return
-        if ns < self.plant.time_ns or self.finished.done():
-            return   # a re-published answer to a tick already passed
+        self._hold(ns, kind, values)
+
+    def _hold(self, ns: int, kind: int, values: list[float]) -> None:
+        """lockstep: keep the command for tick ``ns`` (``_REJECTED``: answered, but the
+        previous command holds) and advance if the present tick is complete."""
         entry = self._pending.setdefault(ns, [None, None])
-        entry[kind] = values if values is not None else _REJECTED
+        entry[kind] = values
         if len(self._pending) > MAX_PENDING:     # commands for ticks far ahead: nonsense
             del self._pending[max(self._pending)]
         self._advance()
+
+    def on_rejected(self, topic: str, bad: InvalidInput, stamp: int | None) -> None:
+        """A rejected command leaves the previous one in force. In lockstep one with a
+        valid stamp still answers its tick (the run goes on); a bad stamp answers none."""
+        if self.lockstep and stamp is not None and not self.finished.done():
+            self._hold(stamp, 0 if topic == THRUST_CMD else 1, _REJECTED)
 
     def _command(self, kind: int, values: list[float]) -> None:
         if kind == 0:
@@ -345,8 +388,39 @@ class PlantSimulator(TiltrovNode):
                     del self._pending[stamp]
                 self._waiting_since = None
                 self._stalled = False
-            plant.step()
-            self._publish_state()
+            self._step()
+
+    def _step(self) -> None:
+        """One plant step (the scenario's faults applied first), then the state out."""
+        if self.config.faults:
+            self._update_failed()
+        self.plant.step()
+        self._publish_state()
+
+    def _update_failed(self) -> None:
+        """Failed thrusters: the parameter's plus the scenario's failed by now."""
+        failed = tuple(sorted(set(self.config.failed_thrusters) | set(
+            failed_at(self.config.faults, seconds(self.plant.time_ns)))))
+        if failed != self.plant.failed_thrusters:
+            self.plant.set_failed_thrusters(failed)
+            self.get_logger().warning(
+                f'at {format_ns(self.plant.time_ns)}: failed thruster(s): '
+                f'{", ".join(THRUSTERS[i] for i in failed) or "none"}')
+
+    def _check_commands(self) -> None:
+        """realtime: zero thrust (tilts held) once thrust_cmd is command_timeout old."""
+        timeout = self.config.command_timeout
+        last = self._last_thrust_at
+        if (last is None or timeout <= 0 or self.commands_stale
+                or self.plant.time_ns - last <= to_ns(timeout)):
+            return
+        self.commands_stale = True
+        self.stale_events += 1
+        self.plant.command(thrusts=(0.0,) * 4)
+        self.get_logger().warning(
+            f'no thrust_cmd for {seconds(self.plant.time_ns - last):.3f} s of sim time '
+            f'(command_timeout {timeout:g} s): thrusters commanded to zero until commands '
+            'return')
 
     @guarded
     def _watchdog(self) -> None:
@@ -437,17 +511,32 @@ class PlantSimulator(TiltrovNode):
                     'sim time falls behind', throttle_duration_sec=THROTTLE)
                 self._rebase()
                 break
-            self.plant.step()
-            self._publish_state()
+            self._check_commands()
+            self._step()
             steps += 1
         if self._reached_end():
             self._finish()
 
     # -- parameters ------------------------------------------------------------------
 
+    def _validate_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
+        for p in parameters:
+            if p.name == 'failed_thrusters':
+                try:
+                    failed_thruster_indices(p.value)
+                except ParameterError as exc:
+                    return self.reject(str(exc))
+        return SetParametersResult(successful=True)
+
     def _apply_parameters(self, parameters: list[Parameter]) -> None:
         """Run-time changes (ranges, types and read-only are checked by rclpy)."""
         for p in parameters:
+            if p.name == 'failed_thrusters':
+                self.config = replace(self.config,
+                                      failed_thrusters=failed_thruster_indices(p.value))
+                self._update_failed()
+            elif p.name == 'command_timeout':
+                self.config = replace(self.config, command_timeout=float(p.value))
             if p.name == 'real_time_factor':
                 self.config = replace(self.config, real_time_factor=float(p.value))
                 if not self.lockstep:
@@ -472,6 +561,10 @@ class PlantSimulator(TiltrovNode):
         elif self._stalled:
             level = WARN
             message = f'stalled at {format_ns(t)}: waiting for thrust_cmd/tilt_cmd'
+        elif self.commands_stale:
+            level = WARN
+            message = (f'no thrust_cmd for more than command_timeout '
+                       f'{self.config.command_timeout:g} s: thrusters at zero')
         if self.stalls and level == OK:
             message += f' ({self.stalls} stall(s) so far)'
         plant = self.plant
@@ -480,10 +573,11 @@ class PlantSimulator(TiltrovNode):
             'real_time_factor_achieved': self._rtf_achieved,
             'stalls': self.stalls, 'startup_retries': self.startup_retries,
             'republished_states': self.republished, 'overruns': self.overruns,
-            'rejected_command_messages': self.rejected_messages,
             'rejected_thrust_commands': plant.thrusters.rejected,
             'rejected_tilt_commands': plant.servos.rejected,
             'finished': self.finished.done(),
+            'commands_stale': self.commands_stale, 'command_stale_events': self.stale_events,
+            'failed_thrusters': [i + 1 for i in plant.failed_thrusters],
         }
 
     def wait_for_delivery(self, timeout: float = 0.5) -> bool:
@@ -504,8 +598,11 @@ def main(args: list[str] | None = None) -> int:
     def until(node: Any) -> Future | None:
         return node.finished if node.config.exit_at_end else None
 
-    return main_loop(PlantSimulator, args, NODE_NAME, until=until,
-                     before_exit=lambda node: node.wait_for_delivery())
+    def before_exit(node: Any) -> None:
+        node.publish_diagnostics()      # the final counts, for recorders and tiltrov soak
+        node.wait_for_delivery()
+
+    return main_loop(PlantSimulator, args, NODE_NAME, until=until, before_exit=before_exit)
 
 
 if __name__ == '__main__':

@@ -31,6 +31,7 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 
 from tiltrov_ros.core.scenarios import ReferenceProfile, load_scenario
 from tiltrov_ros.core.timebase import seconds, to_ns
+from tiltrov_ros.core.validation import stamp_ns as checked_stamp_ns
 
 from .common import (
     CLOCK,
@@ -50,6 +51,7 @@ from .common import (
     fill_twist,
     format_ns,
     guarded,
+    input_callback,
     main_loop,
     stamp_ns,
 )
@@ -86,9 +88,18 @@ class ReferencePublisher(TiltrovNode):
                         else HOLD_ORIGIN)
         self.sim_time = bool(self.get_parameter('use_sim_time').value)
 
-        self._velocity_pub = self.create_publisher(TwistStamped, SETPOINT_VELOCITY,
-                                                   RELIABLE_QOS)
-        self._setpoint_pub = self.create_publisher(PoseStamped, SETPOINT, RELIABLE_QOS)
+        # Guarded: a non-finite reference goes out as the last finite setpoint, held
+        # (zero feed-forward).
+        self._last_good: tuple[tuple[float, ...], tuple[float, ...]] = (
+            (0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0))
+        self._velocity_pub = self.create_safe_publisher(
+            TwistStamped, SETPOINT_VELOCITY, RELIABLE_QOS,
+            lambda msg: fill_twist(TwistStamped(header=msg.header), stamp_ns(msg.header.stamp),
+                                   (0.0,) * 6))
+        self._setpoint_pub = self.create_safe_publisher(
+            PoseStamped, SETPOINT, RELIABLE_QOS,
+            lambda msg: fill_pose(PoseStamped(header=msg.header), stamp_ns(msg.header.stamp),
+                                  *self._last_good))
         self._pose = PoseStamped()
         self._pose.header.frame_id = FRAME_EARTH
         self._twist = TwistStamped()
@@ -118,12 +129,14 @@ class ReferencePublisher(TiltrovNode):
         """Publish the reference at scenario time ``t`` (s) stamped ``stamp`` (ns)."""
         ref = self.profile.at(t)
         self._velocity_pub.publish(fill_twist(self._twist, stamp, ref.velocity))
-        self._setpoint_pub.publish(fill_pose(self._pose, stamp, ref.position, ref.quaternion))
+        if self._setpoint_pub.publish(fill_pose(self._pose, stamp, ref.position,
+                                                ref.quaternion)):
+            self._last_good = (tuple(ref.position), tuple(ref.quaternion))
         self.published += 1
 
-    @guarded
+    @input_callback(CLOCK)
     def _on_clock(self, msg: ClockMsg) -> None:
-        ns = stamp_ns(msg.clock)
+        ns = checked_stamp_ns(msg.clock.sec, msg.clock.nanosec)
         last = self._last_tick
         if last is not None and ns < last:
             self.restarts += 1

@@ -44,8 +44,19 @@ from tiltrov_ros.core.allocation import (
     load_allocator_config,
 )
 from tiltrov_ros.core.errors import ParameterError
+from tiltrov_ros.core.scenarios import ThrusterFault, failed_at, load_scenario
+from tiltrov_ros.core.timebase import seconds, to_ns
+from tiltrov_ros.core.validation import (
+    MAX_WRENCH,
+    InvalidInput,
+    check_finite,
+    clip_wrench,
+    failed_thruster_indices,
+    limit_command,
+)
 
 from .common import (
+    FRAME_BODY,
     OK,
     RELIABLE_QOS,
     THROTTLE,
@@ -60,13 +71,15 @@ from .common import (
     FloatArray,
     Overrides,
     TiltrovNode,
+    declare_failed_thrusters,
     declare_robot,
     descriptor,
     fill_joint_state,
     fill_wrench,
     format_ns,
     guarded,
-    joint_values,
+    input_callback,
+    joint_state_values,
     main_loop,
     new_joint_state,
     new_wrench,
@@ -80,6 +93,12 @@ TILT_REQUEST_MODES = ('auto', 'required', 'ignored')
 WATCHDOG_PERIOD = 0.1
 BUFFER = 200
 ALLOCATOR_KEYS = ('mode', 'max_tilt_step', 'weights')
+#: Wrench components, in the order of wrench_cmd (force X Y Z, moment K M N).
+WRENCH_DOFS = ('X', 'Y', 'Z', 'K', 'M', 'N')
+
+
+def thruster_names(indices: Sequence[int]) -> str:
+    return ', '.join(THRUSTERS[i] for i in indices) or 'none'
 
 
 @dataclass
@@ -98,12 +117,20 @@ class ThrustAllocatorNode(TiltrovNode):
         super().__init__(node_name, namespace=namespace, context=context, cli_args=cli_args,
                          parameter_overrides=parameter_overrides)
         self._declare_parameters()
+        self.failed: tuple[int, ...] = ()       # failed thrusters the allocator knows
         self.allocator = self.allocator_config.build(self.robot, self.control_period)
+        self._use_failed(self._wanted_failed(None), 'at start-up')
 
-        self._achieved_pub = self.create_publisher(WrenchStamped, WRENCH_ACHIEVED,
-                                                   RELIABLE_QOS)
-        self._tilt_pub = self.create_publisher(JointState, TILT_CMD, RELIABLE_QOS)
-        self._thrust_pub = self.create_publisher(JointState, THRUST_CMD, RELIABLE_QOS)
+        # Guarded: a non-finite message is replaced by the same part of the safe answer.
+        self._achieved_pub = self.create_safe_publisher(
+            WrenchStamped, WRENCH_ACHIEVED, RELIABLE_QOS,
+            lambda msg: self._safe_msgs(stamp_ns(msg.header.stamp))[0])
+        self._tilt_pub = self.create_safe_publisher(
+            JointState, TILT_CMD, RELIABLE_QOS,
+            lambda msg: self._safe_msgs(stamp_ns(msg.header.stamp))[1])
+        self._thrust_pub = self.create_safe_publisher(
+            JointState, THRUST_CMD, RELIABLE_QOS,
+            lambda msg: self._safe_msgs(stamp_ns(msg.header.stamp))[2])
         self.create_subscription(WrenchStamped, WRENCH_CMD, self._on_wrench, RELIABLE_QOS)
         if self.tilt_request_mode != 'ignored':
             self.create_subscription(JointState, TILT_REQUEST, self._on_tilt_request,
@@ -125,8 +152,19 @@ class ThrustAllocatorNode(TiltrovNode):
         self.republished = 0
         self.stale_requests = 0
         self.dropped = 0
-        self.rejected_messages = 0
+        self.out_of_limits = 0
+        self.safe_answers = 0
+        self.clipped = 0
+        self._handling: int | None = None     # stamp of the wrench being handled
         self.resets = 0
+        self._wrench_seen: tuple[int, int] | None = None    # (stamp, steady ns) newest
+        self.wrench_stale = False
+        self.stale_events = 0
+        self.watchdog_outputs = 0
+        #: Ticks at which each wrench component was not achieved; the last shortfall.
+        self.unachieved: Counter[str] = Counter()
+        self.last_shortfall = np.zeros(6)
+        self.create_timer(self.control_period, self._wrench_watchdog, clock=self.steady)
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
         self.start_diagnostics()
@@ -156,6 +194,17 @@ class ThrustAllocatorNode(TiltrovNode):
         self.input_timeout = d('input_timeout', 1.0, descriptor(
             'wall seconds a wrench waits for its tilt_request before the latest one is '
             'used', floating=(0.001, 3600.0))).value
+        self.wrench_timeout = self.declare_timeout(
+            'wrench_timeout', 0.5, 'zero thrust (tilts held) is published every control '
+            'period while the newest valid wrench_cmd is older than this')
+        self.failed_param = declare_failed_thrusters(self)
+        scenario = d('scenario', '', descriptor(
+            'scenario name or path whose faults (thruster failures) the allocator is told '
+            'of at their time + detected_after, by the wrench stamps; empty: none',
+            read_only=True)).value
+        self.scenario_faults: tuple[ThrusterFault, ...] = (
+            load_scenario(scenario).faults if scenario else ())
+        self.declare_stamp_bounds()
         self.robot, self.control_period = declare_robot(self)
         self.check_overrides()
         if self.tilt_request_mode not in TILT_REQUEST_MODES:
@@ -165,6 +214,12 @@ class ThrustAllocatorNode(TiltrovNode):
             {key: self.get_parameter(key).value for key in ALLOCATOR_KEYS})
 
     def _validate_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
+        for p in parameters:
+            if p.name == 'failed_thrusters':
+                try:
+                    failed_thruster_indices(p.value)
+                except ParameterError as exc:
+                    return self.reject(str(exc))
         changes = {p.name: p.value for p in parameters if p.name in ALLOCATOR_KEYS}
         if not changes:
             return SetParametersResult(successful=True)
@@ -177,12 +232,41 @@ class ThrustAllocatorNode(TiltrovNode):
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, parameters: list[Parameter]) -> None:
+        for p in parameters:
+            if p.name == 'wrench_timeout':
+                self.wrench_timeout = float(p.value)
+            elif p.name == 'failed_thrusters':
+                self.failed_param = failed_thruster_indices(p.value)
+                self._use_failed(self._wanted_failed(self._last_ns if self._last_ns >= 0
+                                                     else None), 'failed_thrusters set')
         if not any(p.name in ALLOCATOR_KEYS for p in parameters):
             return
         self.allocator_config = AllocatorConfig.from_mapping(
             {key: self.get_parameter(key).value for key in ALLOCATOR_KEYS})
-        self.allocator = self.allocator_config.build(self.robot, self.control_period)
+        self.allocator = self.allocator_config.build(self.robot, self.control_period,
+                                                     self.failed)
         self.get_logger().info(f'allocator changed: {self.allocator_config}')
+
+    # -- failed thrusters ------------------------------------------------------------
+
+    def _wanted_failed(self, ns: int | None) -> tuple[int, ...]:
+        """``failed_thrusters`` plus the scenario's faults detected by stamp ``ns``."""
+        scheduled = (failed_at(self.scenario_faults, seconds(ns), detected=True)
+                     if ns is not None and self.scenario_faults else ())
+        return tuple(sorted(set(self.failed_param) | set(scheduled)))
+
+    def _use_failed(self, failed: tuple[int, ...], why: str) -> None:
+        """Allocate with the thrusters not in ``failed`` (the core's robust allocator
+        with ``failed_thrusters``: least weighted error, depth and attitude first)."""
+        if failed == self.failed:
+            return
+        self.failed = failed
+        self.allocator = self.allocator_config.build(self.robot, self.control_period, failed)
+        working = [i for i in range(4) if i not in failed]
+        self.get_logger().warning(
+            f'{why}: failed thruster(s): {thruster_names(failed)}; allocating with '
+            f'{thruster_names(working)} (weights {list(self.allocator_config.weights)}: '
+            'depth and attitude first)')
 
     # -- inputs ----------------------------------------------------------------------
 
@@ -192,22 +276,28 @@ class ThrustAllocatorNode(TiltrovNode):
                     or self.count_publishers(TILT_REQUEST) > 0)
         return self.tilt_request_mode == 'required'
 
-    @guarded
+    @input_callback(WRENCH_CMD)
     def _on_wrench(self, msg: WrenchStamped) -> None:
-        ns = stamp_ns(msg.header.stamp)
+        ns = self.check_header(msg.header, FRAME_BODY)
         if ns == self._last_ns and self._last_msgs is not None:
             self.republished += 1
+            self._mark_fresh(ns)
             self._publish(*self._last_msgs)
             return
         if ns < self._last_ns:
             self._reset(f'wrench_cmd went back from {format_ns(self._last_ns)} to '
                         f'{format_ns(ns)}')
         wrench = wrench_array(msg)
-        if not np.all(np.isfinite(wrench)):
-            self.rejected_messages += 1
-            self.get_logger().error(f'wrench_cmd stamped {format_ns(ns)} is not finite: its '
-                                    'non-finite components are read as 0',
-                                    throttle_duration_sec=THROTTLE)
+        check_finite(wrench, 'wrench')
+        self._mark_fresh(ns)
+        self._handling = ns
+        clipped, changed = clip_wrench(wrench)
+        if changed:
+            self.clipped += 1
+            self.get_logger().warning(
+                f'wrench_cmd stamped {format_ns(ns)} has components beyond +-{MAX_WRENCH:g}: '
+                'clipped to it', throttle_duration_sec=THROTTLE)
+            wrench = np.array(clipped)
         if self._needs_request():
             request = self._requests.get(ns)
             if request is None:
@@ -219,16 +309,10 @@ class ThrustAllocatorNode(TiltrovNode):
         else:
             self._allocate(ns, wrench, None)
 
-    @guarded
+    @input_callback(TILT_REQUEST)
     def _on_tilt_request(self, msg: JointState) -> None:
-        ns = stamp_ns(msg.header.stamp)
-        values = joint_values(msg, TILTS, 'position')
-        if values is None:
-            self.rejected_messages += 1
-            self.get_logger().error(f'ignoring a tilt_request stamped {format_ns(ns)}: needs '
-                                    'finite positions for tilt_front and tilt_rear',
-                                    throttle_duration_sec=THROTTLE)
-            return
+        ns = self.check_header(msg.header, None)
+        values = joint_state_values(msg, TILTS, 'position')
         request = (values[0], values[1])
         self._requests[ns] = request
         self._latest_request = request
@@ -258,6 +342,8 @@ class ThrustAllocatorNode(TiltrovNode):
 
     def _allocate(self, ns: int, wrench: FloatArray, request: tuple[float, float] | None) -> None:
         self._waiting = None
+        if self.scenario_faults:
+            self._use_failed(self._wanted_failed(ns), f'at {format_ns(ns)} (scenario)')
         if request is None:
             result = self.allocator.allocate(wrench, previous=self.previous)
         else:
@@ -270,6 +356,7 @@ class ThrustAllocatorNode(TiltrovNode):
             self.feasible += 1
         else:
             self.infeasible += 1
+            self._report_shortfall(ns, wrench, np.asarray(result.achieved, dtype=float))
         limit = self.robot.max_thrust * (1.0 - 1e-9)
         if np.any(np.abs(result.thrusts) >= limit):
             self.saturated += 1
@@ -278,17 +365,52 @@ class ThrustAllocatorNode(TiltrovNode):
             self.max_error = max(self.max_error, error)
         self._answer(ns, result.thrusts, (result.tilt_front, result.tilt_rear),
                      result.achieved)
+        self._handling = None
         for stamp in [s for s in self._requests if s < ns]:
             del self._requests[stamp]
 
     def _answer(self, ns: int, thrusts: Sequence[float], tilts: Sequence[float],
                 achieved: Sequence[float]) -> None:
-        msgs = (fill_wrench(new_wrench(), ns, achieved),
-                fill_joint_state(new_joint_state(TILTS), ns, position=tilts),
-                fill_joint_state(new_joint_state(THRUSTERS), ns, effort=thrusts))
+        """Publish an answer stamped ``ns``; one beyond the thrust limit or tilt range
+        (or not finite) is replaced by the safe answer, whatever the core returned."""
+        r = self.robot
+        limited = limit_command(thrusts, tilts, r.max_thrust, r.tilt_min, r.tilt_max)
+        if limited is not None:
+            msgs = (fill_wrench(new_wrench(), ns, achieved),
+                    fill_joint_state(new_joint_state(TILTS), ns, position=limited[1]),
+                    fill_joint_state(new_joint_state(THRUSTERS), ns, effort=limited[0]))
+        else:
+            self.out_of_limits += 1
+            self.get_logger().error(
+                f'allocation stamped {format_ns(ns)} is beyond the limits (thrusts '
+                f'{list(thrusts)}, tilts {list(tilts)}): publishing zero thrust',
+                throttle_duration_sec=THROTTLE)
+            msgs = self._safe_msgs(ns)
         self._last_ns = ns
         self._last_msgs = msgs
         self._publish(*msgs)
+
+    def held_tilts(self) -> tuple[float, float]:
+        """The tilts of the last allocation (in range), else 0: what a safe answer holds."""
+        prev = self.previous
+        if prev is None or not (math.isfinite(prev.tilt_front)
+                                and math.isfinite(prev.tilt_rear)):
+            return (0.0, 0.0)
+        lo, hi = self.robot.tilt_min, self.robot.tilt_max
+        return (min(max(prev.tilt_front, lo), hi), min(max(prev.tilt_rear, lo), hi))
+
+    def _safe_msgs(self, ns: int) -> tuple[WrenchStamped, JointState, JointState]:
+        """The safe answer stamped ``ns``: zero thrust (so zero wrench), tilts held."""
+        return (fill_wrench(new_wrench(), ns, (0.0,) * 6),
+                fill_joint_state(new_joint_state(TILTS), ns, position=self.held_tilts()),
+                fill_joint_state(new_joint_state(THRUSTERS), ns, effort=(0.0,) * 4))
+
+    def _answer_safe(self, ns: int) -> None:
+        self.safe_answers += 1
+        self._waiting = None
+        self._last_ns = ns
+        self._last_msgs = self._safe_msgs(ns)
+        self._publish(*self._last_msgs)
 
     def _publish(self, achieved: WrenchStamped, tilt: JointState, thrust: JointState) -> None:
         self._achieved_pub.publish(achieved)
@@ -308,12 +430,58 @@ class ThrustAllocatorNode(TiltrovNode):
         """Safe answer to the wrench being handled: no thrust, tilts held."""
         super().on_callback_error(callback, exc)
         waiting, self._waiting = self._waiting, None
-        ns = waiting.ns if waiting is not None else None
+        ns = waiting.ns if waiting is not None else self._handling
+        self._handling = None
         if ns is None or ns == self._last_ns:
             return
-        prev = self.previous
-        tilts = (prev.tilt_front, prev.tilt_rear) if prev is not None else (0.0, 0.0)
-        self._answer(ns, (0.0,) * 4, tilts, (0.0,) * 6)
+        self._answer_safe(ns)
+
+    def _report_shortfall(self, ns: int, wrench: FloatArray, achieved: FloatArray) -> None:
+        """Count and log (throttled) the components of ``wrench`` not achieved."""
+        shortfall = wrench - achieved
+        tol = 1e-6 * max(float(np.linalg.norm(wrench)), self.robot.max_thrust)
+        missed = [dof for dof, v in zip(WRENCH_DOFS, shortfall) if abs(v) > tol]
+        self.unachieved.update(missed)
+        self.last_shortfall = shortfall
+        self.get_logger().warning(
+            f'cannot achieve wrench_cmd stamped {format_ns(ns)} with thrusters '
+            f'{thruster_names([i for i in range(4) if i not in self.failed])}: short by '
+            + ', '.join(f'{dof} {v:+.3g}' for dof, v in zip(WRENCH_DOFS, shortfall)
+                        if dof in missed), throttle_duration_sec=THROTTLE)
+
+    # -- watchdog --------------------------------------------------------------------
+
+    def _mark_fresh(self, ns: int) -> None:
+        self._wrench_seen = (ns, self.steady_ns())
+        if self.wrench_stale:
+            self.wrench_stale = False
+            self.get_logger().info(f'wrench_cmd fresh again (stamped {format_ns(ns)}): '
+                                   'allocation resumes')
+
+    @guarded
+    def _wrench_watchdog(self) -> None:
+        """Zero thrust, tilts held, while wrench_cmd is stale (not cached)."""
+        seen = self._wrench_seen
+        if seen is None or self.wrench_timeout <= 0:
+            return
+        age = self.input_age_ns(*seen)
+        if age <= to_ns(self.wrench_timeout):
+            return
+        if not self.wrench_stale:
+            self.wrench_stale = True
+            self.stale_events += 1
+            self.get_logger().warning(
+                f'wrench_cmd is stale: the newest (stamped {format_ns(seen[0])}) is '
+                f'{age / 1e9:.3f} s old (wrench_timeout {self.wrench_timeout:g} s); '
+                'commanding zero thrust until a fresh one comes')
+        self.watchdog_outputs += 1
+        self._publish(*self._safe_msgs(self.estimated_now_ns(*seen, to_ns(self.control_period))))
+
+    def on_rejected(self, topic: str, bad: InvalidInput, stamp: int | None) -> None:
+        """A rejected wrench with a valid stamp gets the safe answer (the plant waits
+        for that stamp in lockstep); a bad stamp gets none."""
+        if topic == WRENCH_CMD and stamp is not None and stamp != self._last_ns:
+            self._answer_safe(stamp)
 
     # -- diagnostics -----------------------------------------------------------------
 
@@ -321,8 +489,18 @@ class ThrustAllocatorNode(TiltrovNode):
         level = OK
         message = (f'{self.allocator_config.mode}: {self.feasible} feasible, '
                    f'{self.infeasible} infeasible, {self.saturated} saturated')
-        if self.infeasible or self.stale_requests or self.rejected_messages:
+        if self.infeasible or self.stale_requests:
             level = WARN
+        if self.failed:
+            message += f'; failed: {thruster_names(self.failed)}'
+            if self.unachieved:
+                message += ('; not achieved (ticks): ' + ', '.join(
+                    f'{dof} {self.unachieved[dof]}' for dof in WRENCH_DOFS
+                    if self.unachieved[dof]))
+        if self.wrench_stale:
+            level = WARN
+            message = (f'wrench_cmd stale (older than wrench_timeout '
+                       f'{self.wrench_timeout:g} s): zero thrust; ' + message)
         last = self.previous
         return level, message, {
             'mode': self.allocator_config.mode, 'ticks': self.ticks,
@@ -330,10 +508,16 @@ class ThrustAllocatorNode(TiltrovNode):
             'saturated': self.saturated, 'max_weighted_error': self.max_error,
             'methods': dict(self.methods), 'republished': self.republished,
             'stale_tilt_requests': self.stale_requests,
-            'dropped_wrenches': self.dropped,
-            'rejected_messages': self.rejected_messages, 'resets': self.resets,
+            'dropped_wrenches': self.dropped, 'safe_answers': self.safe_answers,
+            'out_of_limits': self.out_of_limits, 'resets': self.resets,
+            'clipped_wrenches': self.clipped,
             'last_feasible': last.feasible if last is not None else True,
             'tilt_request': self.tilt_request_mode,
+            'failed_thrusters': [i + 1 for i in self.failed],
+            'unachieved_ticks': {dof: self.unachieved[dof] for dof in WRENCH_DOFS},
+            'last_shortfall': [float(v) for v in self.last_shortfall],
+            'wrench_stale': self.wrench_stale, 'wrench_stale_events': self.stale_events,
+            'watchdog_zero_thrusts': self.watchdog_outputs,
         }
 
 

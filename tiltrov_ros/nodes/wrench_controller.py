@@ -49,8 +49,15 @@ from tiltrov_ros.core.controllers import (
 )
 from tiltrov_ros.core.errors import ParameterError
 from tiltrov_ros.core.timebase import seconds, to_ns
+from tiltrov_ros.core.validation import (
+    InvalidInput,
+    check_finite,
+    check_frame,
+    check_quaternion,
+)
 
 from .common import (
+    FRAME_BODY,
     FRAME_EARTH,
     LOCKSTEP,
     MODES,
@@ -75,6 +82,7 @@ from .common import (
     fill_wrench,
     format_ns,
     guarded,
+    input_callback,
     main_loop,
     new_joint_state,
     new_wrench,
@@ -144,9 +152,16 @@ class WrenchController(TiltrovNode):
         self.kind = self.controller_config.kind
         self.lockstep = self.mode == LOCKSTEP
 
-        self._wrench_pub = self.create_publisher(WrenchStamped, WRENCH_CMD, RELIABLE_QOS)
-        self._tilt_pub = (self.create_publisher(JointState, TILT_REQUEST, RELIABLE_QOS)
-                          if self.kind == 'switching' else None)
+        # Guarded: a non-finite wrench goes out as zero, a non-finite tilt request as
+        # the last finite one.
+        self._wrench_pub = self.create_safe_publisher(
+            WrenchStamped, WRENCH_CMD, RELIABLE_QOS,
+            lambda msg: fill_wrench(new_wrench(), stamp_ns(msg.header.stamp), np.zeros(6)))
+        self._tilt_pub = (self.create_safe_publisher(
+            JointState, TILT_REQUEST, RELIABLE_QOS,
+            lambda msg: fill_joint_state(new_joint_state(TILTS), stamp_ns(msg.header.stamp),
+                                         position=self._safe_tilts))
+            if self.kind == 'switching' else None)
         # Raw: only the odometry at control ticks (1 in control_period / step_size) is
         # deserialized; the stamp of the others is read from the CDR header.
         self.create_subscription(Odometry, ODOM, self._on_odom_raw, reader_qos(self.mode),
@@ -164,18 +179,28 @@ class WrenchController(TiltrovNode):
         self._last_ns = -1
         self._last_msgs: tuple[WrenchStamped, JointState | None] | None = None
         self._last_tilts: tuple[float, float] = (0.0, 0.0)
+        self._safe_tilts: tuple[float, float] = (0.0, 0.0)    # the last finite request
         self._warned_tick = -1
         self.ticks = 0
         self.republished = 0
         self.setpoint_waits = 0
         self.velocity_timeouts = 0
         self.no_setpoint = 0
-        self.rejected_messages = 0
+        self.safe_answers = 0
         self.resets = 0
         self.last_mode = ''
+        self._odom_seen: tuple[int, int] | None = None     # (stamp, steady ns) of the newest
+        self.odom_stale = False
+        self.stale_events = 0
+        self.watchdog_outputs = 0
 
         if self.lockstep:
             self.create_timer(WATCHDOG_PERIOD, self._watchdog, clock=self.steady)
+        else:
+            # In lockstep the plant does not advance without the loop: sim time never
+            # runs ahead of odom, and a wrench for a tick not reached would break the
+            # run's determinism; the plant reports the stall.
+            self.create_timer(self.control_period, self._odom_watchdog, clock=self.steady)
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
         self.start_diagnostics()
@@ -201,6 +226,10 @@ class WrenchController(TiltrovNode):
         self.input_timeout = d('input_timeout', 1.0, descriptor(
             'lockstep: wall seconds to wait for the setpoint_velocity of a tick before '
             'reading it as zero', floating=(0.001, 3600.0))).value
+        self.odom_timeout = self.declare_timeout(
+            'odom_timeout', 0.5, 'realtime: a zero wrench is published (every control '
+            'period) while the newest valid odom is older than this')
+        self.declare_stamp_bounds()
         for key in GAIN_KEYS:
             d(f'gains.{key}', [float(v) for v in getattr(shipped.gains, key)], descriptor(
                 _GAIN_DOC[key], constraints='6 finite numbers >= 0 (x y z roll pitch yaw)'))
@@ -231,6 +260,9 @@ class WrenchController(TiltrovNode):
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, parameters: list[Parameter]) -> None:
+        for p in parameters:
+            if p.name == 'odom_timeout':
+                self.odom_timeout = float(p.value)
         if not any(p.name.startswith(('gains.', 'switching.')) for p in parameters):
             return
         self.controller_config = ControllerConfig.from_mapping(
@@ -246,9 +278,10 @@ class WrenchController(TiltrovNode):
         if cdr_stamp_ns(data) % self.period_ns == 0:
             self.on_odom(deserialize_message(data, Odometry))
 
+    @input_callback(ODOM)
     def on_odom(self, msg: Odometry) -> None:
         """An odometry message (the raw callback passes those at control ticks)."""
-        ns = stamp_ns(msg.header.stamp)
+        ns = self.check_header(msg.header, FRAME_EARTH)
         if ns % self.period_ns:
             return
         if ns == self._last_ns and self._last_msgs is not None:
@@ -258,49 +291,36 @@ class WrenchController(TiltrovNode):
         if ns < self._last_ns:
             self._reset(f'odometry went back from {format_ns(self._last_ns)} to '
                         f'{format_ns(ns)}')
+        check_frame(msg.child_frame_id, FRAME_BODY, 'child_frame_id')
         position, quaternion, nu = odometry_arrays(msg)
-        if not (np.all(np.isfinite(position)) and np.all(np.isfinite(quaternion))
-                and np.all(np.isfinite(nu)) and np.any(quaternion != 0.0)):
-            self.rejected_messages += 1
-            self.get_logger().error(f'odom stamped {format_ns(ns)} is not finite (or a zero '
-                                    'quaternion); publishing a zero wrench',
-                                    throttle_duration_sec=THROTTLE)
-            self._publish_safe(ns)
-            return
-        self._tick = _Tick(ns, position, quaternion, nu, self.steady_ns())
+        check_finite(position, 'position')
+        check_quaternion(quaternion)
+        check_finite(nu, 'twist')
+        now = self.steady_ns()
+        self._odom_seen = (ns, now)
+        if self.odom_stale:
+            self.odom_stale = False
+            self.get_logger().info(f'odom fresh again (stamped {format_ns(ns)}): control '
+                                   'resumes')
+        self._tick = _Tick(ns, position, quaternion, nu, now)
         self._try_compute()
 
-    @guarded
+    @input_callback(SETPOINT)
     def _on_setpoint(self, msg: PoseStamped) -> None:
-        if msg.header.frame_id not in ('', FRAME_EARTH):
-            self.rejected_messages += 1
-            self.get_logger().error(f'ignoring a setpoint in frame {msg.header.frame_id!r}: '
-                                    f'it must be in {FRAME_EARTH}',
-                                    throttle_duration_sec=THROTTLE)
-            return
-        ns = stamp_ns(msg.header.stamp)
+        ns = self.check_header(msg.header, FRAME_EARTH)
         position, quaternion = pose_arrays(msg)
-        if not (np.all(np.isfinite(position)) and np.all(np.isfinite(quaternion))
-                and np.any(quaternion != 0.0)):
-            self.rejected_messages += 1
-            self.get_logger().error(f'ignoring a setpoint stamped {format_ns(ns)}: not '
-                                    'finite or a zero quaternion',
-                                    throttle_duration_sec=THROTTLE)
-            return
+        check_finite(position, 'position')
+        check_quaternion(quaternion)
         self._setpoints[ns] = (position, quaternion)
         self._latest_setpoint = (ns, position, quaternion)
         _trim(self._setpoints)
         self._try_compute()
 
-    @guarded
+    @input_callback(SETPOINT_VELOCITY)
     def _on_velocity(self, msg: TwistStamped) -> None:
-        ns = stamp_ns(msg.header.stamp)
+        ns = self.check_header(msg.header, FRAME_EARTH)
         velocity = twist_array(msg)
-        if not np.all(np.isfinite(velocity)):
-            self.rejected_messages += 1
-            self.get_logger().error(f'ignoring a setpoint_velocity stamped {format_ns(ns)}: '
-                                    'not finite', throttle_duration_sec=THROTTLE)
-            return
+        check_finite(velocity, 'twist')
         self._velocities[ns] = velocity
         self._latest_velocity = (ns, velocity)
         _trim(self._velocities)
@@ -351,6 +371,8 @@ class WrenchController(TiltrovNode):
         if self._tilt_pub is not None:
             tilts = out.tilt_request if out.tilt_request is not None else self._last_tilts
             self._last_tilts = (float(tilts[0]), float(tilts[1]))
+            if all(np.isfinite(self._last_tilts)):
+                self._safe_tilts = self._last_tilts
             tilt_msg = fill_joint_state(new_joint_state(TILTS), ns, position=self._last_tilts)
         self.ticks += 1
         self.last_mode = out.mode
@@ -365,7 +387,39 @@ class WrenchController(TiltrovNode):
 
     def _publish_safe(self, ns: int) -> None:
         """A zero wrench (and the tilts last requested) stamped ``ns``."""
-        self._answer(ns, ControlOutput(np.zeros(6), self._last_tilts, 'safe'))
+        self.safe_answers += 1
+        self._answer(ns, ControlOutput(np.zeros(6), self._safe_tilts, 'safe'))
+
+    def on_rejected(self, topic: str, bad: InvalidInput, stamp: int | None) -> None:
+        """A rejected odometry tick with a valid stamp is answered with a zero wrench
+        (the state is unknown; the plant waits for that stamp in lockstep)."""
+        if (topic == ODOM and stamp is not None and stamp % self.period_ns == 0
+                and stamp != self._last_ns):
+            self._tick = None
+            self._publish_safe(stamp)
+
+    @guarded
+    def _odom_watchdog(self) -> None:
+        """realtime: a zero wrench while odom is stale (not cached: the next fresh
+        tick is computed as usual)."""
+        seen = self._odom_seen
+        if seen is None or self.odom_timeout <= 0:
+            return
+        age = self.input_age_ns(*seen)
+        if age <= to_ns(self.odom_timeout):
+            return
+        if not self.odom_stale:
+            self.odom_stale = True
+            self.stale_events += 1
+            self.get_logger().warning(
+                f'odom is stale: the newest (stamped {format_ns(seen[0])}) is '
+                f'{age / 1e9:.3f} s old (odom_timeout {self.odom_timeout:g} s); publishing a '
+                'zero wrench until fresh odometry returns')
+        self.watchdog_outputs += 1
+        ns = self.estimated_now_ns(*seen, self.period_ns)
+        self._publish(fill_wrench(new_wrench(), ns, np.zeros(6)),
+                      None if self._tilt_pub is None else fill_joint_state(
+                          new_joint_state(TILTS), ns, position=self._safe_tilts))
 
     def _reset(self, why: str) -> None:
         self.resets += 1
@@ -407,22 +461,27 @@ class WrenchController(TiltrovNode):
     def diagnostic_status(self) -> tuple[int, str, dict[str, Any]]:
         level, message = OK, f'{self.kind}: {self.ticks} ticks'
         tick = self._tick
-        if (tick is not None and self.lockstep
+        if self.odom_stale:
+            level = WARN
+            message = (f'odom stale (older than odom_timeout {self.odom_timeout:g} s): '
+                       'publishing a zero wrench')
+        elif (tick is not None and self.lockstep
                 and (self.steady_ns() - tick.since) / 1e9 >= self.input_timeout):
             level = WARN
             message = f'waiting for the setpoint stamped {format_ns(tick.ns)}'
-        elif self.rejected_messages or self.velocity_timeouts or self.no_setpoint:
+        elif self.velocity_timeouts or self.no_setpoint:
             level = WARN
-            message += (f'; {self.rejected_messages} rejected input(s), '
-                        f'{self.velocity_timeouts} velocity timeout(s), '
+            message += (f'; {self.velocity_timeouts} velocity timeout(s), '
                         f'{self.no_setpoint} tick(s) without setpoint')
         return level, message, {
             'controller': self.kind, 'mode': self.mode, 'ticks': self.ticks,
             'last_tick': seconds(max(self._last_ns, 0)), 'control_mode': self.last_mode,
             'republished': self.republished, 'setpoint_waits': self.setpoint_waits,
             'velocity_timeouts': self.velocity_timeouts,
-            'ticks_without_setpoint': self.no_setpoint,
-            'rejected_messages': self.rejected_messages, 'resets': self.resets,
+            'ticks_without_setpoint': self.no_setpoint, 'safe_answers': self.safe_answers,
+            'resets': self.resets, 'odom_stale': self.odom_stale,
+            'odom_stale_events': self.stale_events,
+            'watchdog_zero_wrenches': self.watchdog_outputs,
         }
 
 
