@@ -114,6 +114,14 @@ OK, WARN, ERROR = 0, 1, 2
 RELIABLE_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
                           durability=DurabilityPolicy.VOLATILE,
                           history=HistoryPolicy.KEEP_LAST, depth=10)
+#: The stack's publishers: reliable, with a history deep enough that a sample a
+#: slow reader (the bag recorder on a loaded machine) has not acknowledged yet is
+#: still there to be resent: a KEEP_LAST writer drops its oldest sample when the
+#: history is full, acknowledged or not. In lockstep the plant publishes up to
+#: hundreds of steps per wall second; 1000 samples are seconds of them.
+PUBLISHER_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
+                           durability=DurabilityPolicy.VOLATILE,
+                           history=HistoryPolicy.KEEP_LAST, depth=1000)
 #: The reference publisher's own /clock reader: reliable, deep enough that a
 #: burst of lockstep steps is never overwritten before it is taken.
 CLOCK_READER_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,

@@ -70,6 +70,7 @@ from .common import (
     MODES,
     ODOM,
     OK,
+    PUBLISHER_QOS,
     REALTIME,
     RELIABLE_QOS,
     THROTTLE,
@@ -233,9 +234,9 @@ class PlantSimulator(TiltrovNode):
         self.finished: Future = Future()
 
         # Guarded: a non-finite state (a diverged integration) is withheld and counted.
-        self._odom_pub = self.create_safe_publisher(Odometry, ODOM, RELIABLE_QOS)
-        self._joint_pub = self.create_safe_publisher(JointState, JOINT_STATES, RELIABLE_QOS)
-        self._clock_pub = self.create_safe_publisher(ClockMsg, CLOCK, RELIABLE_QOS)
+        self._odom_pub = self.create_safe_publisher(Odometry, ODOM, PUBLISHER_QOS)
+        self._joint_pub = self.create_safe_publisher(JointState, JOINT_STATES, PUBLISHER_QOS)
+        self._clock_pub = self.create_safe_publisher(ClockMsg, CLOCK, PUBLISHER_QOS)
         self._odom_msg = new_odometry()
         self._joint_msg = new_joint_state(TILTS + THRUSTERS)
         self._clock_msg = ClockMsg()

@@ -38,7 +38,7 @@ from .common import (
     CLOCK_READER_QOS,
     FRAME_EARTH,
     OK,
-    RELIABLE_QOS,
+    PUBLISHER_QOS,
     SETPOINT,
     SETPOINT_VELOCITY,
     THROTTLE,
@@ -93,11 +93,11 @@ class ReferencePublisher(TiltrovNode):
         self._last_good: tuple[tuple[float, ...], tuple[float, ...]] = (
             (0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0))
         self._velocity_pub = self.create_safe_publisher(
-            TwistStamped, SETPOINT_VELOCITY, RELIABLE_QOS,
+            TwistStamped, SETPOINT_VELOCITY, PUBLISHER_QOS,
             lambda msg: fill_twist(TwistStamped(header=msg.header), stamp_ns(msg.header.stamp),
                                    (0.0,) * 6))
         self._setpoint_pub = self.create_safe_publisher(
-            PoseStamped, SETPOINT, RELIABLE_QOS,
+            PoseStamped, SETPOINT, PUBLISHER_QOS,
             lambda msg: fill_pose(PoseStamped(header=msg.header), stamp_ns(msg.header.stamp),
                                   *self._last_good))
         self._pose = PoseStamped()

@@ -58,6 +58,7 @@ from tiltrov_ros.core.validation import (
 from .common import (
     FRAME_BODY,
     OK,
+    PUBLISHER_QOS,
     RELIABLE_QOS,
     THROTTLE,
     THRUST_CMD,
@@ -123,13 +124,13 @@ class ThrustAllocatorNode(TiltrovNode):
 
         # Guarded: a non-finite message is replaced by the same part of the safe answer.
         self._achieved_pub = self.create_safe_publisher(
-            WrenchStamped, WRENCH_ACHIEVED, RELIABLE_QOS,
+            WrenchStamped, WRENCH_ACHIEVED, PUBLISHER_QOS,
             lambda msg: self._safe_msgs(stamp_ns(msg.header.stamp))[0])
         self._tilt_pub = self.create_safe_publisher(
-            JointState, TILT_CMD, RELIABLE_QOS,
+            JointState, TILT_CMD, PUBLISHER_QOS,
             lambda msg: self._safe_msgs(stamp_ns(msg.header.stamp))[1])
         self._thrust_pub = self.create_safe_publisher(
-            JointState, THRUST_CMD, RELIABLE_QOS,
+            JointState, THRUST_CMD, PUBLISHER_QOS,
             lambda msg: self._safe_msgs(stamp_ns(msg.header.stamp))[2])
         self.create_subscription(WrenchStamped, WRENCH_CMD, self._on_wrench, RELIABLE_QOS)
         if self.tilt_request_mode != 'ignored':

@@ -63,6 +63,7 @@ from .common import (
     MODES,
     ODOM,
     OK,
+    PUBLISHER_QOS,
     REALTIME,
     RELIABLE_QOS,
     SETPOINT,
@@ -155,10 +156,10 @@ class WrenchController(TiltrovNode):
         # Guarded: a non-finite wrench goes out as zero, a non-finite tilt request as
         # the last finite one.
         self._wrench_pub = self.create_safe_publisher(
-            WrenchStamped, WRENCH_CMD, RELIABLE_QOS,
+            WrenchStamped, WRENCH_CMD, PUBLISHER_QOS,
             lambda msg: fill_wrench(new_wrench(), stamp_ns(msg.header.stamp), np.zeros(6)))
         self._tilt_pub = (self.create_safe_publisher(
-            JointState, TILT_REQUEST, RELIABLE_QOS,
+            JointState, TILT_REQUEST, PUBLISHER_QOS,
             lambda msg: fill_joint_state(new_joint_state(TILTS), stamp_ns(msg.header.stamp),
                                          position=self._safe_tilts))
             if self.kind == 'switching' else None)
