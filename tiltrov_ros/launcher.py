@@ -210,6 +210,11 @@ def stack_specs(options: LaunchOptions, *, config_dir: Path | None = None,
     if options.allocator is not None:
         allocator['mode'] = options.allocator
     reference = {'scenario': scenario_param, 'duration': duration, **sim, **robot}
+    if options.record is not None and options.lockstep:
+        # Nothing these nodes publish goes out before the recorder reads it (matters
+        # for a node started again mid-run: --respawn).
+        for overrides in (controller, allocator, reference):
+            overrides['wait_for_recorder'] = RECORDER
 
     def spec(name: str, module: str, cls: str, overrides: dict[str, Any]) -> NodeSpec:
         return NodeSpec(name, f'tiltrov_ros.nodes.{module}', cls, files(name), overrides,

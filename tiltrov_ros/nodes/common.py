@@ -17,6 +17,7 @@ import math
 import os
 import struct
 import sys
+import time
 from typing import Any, TypeVar
 
 from builtin_interfaces.msg import Time
@@ -95,6 +96,10 @@ MODES = (LOCKSTEP, REALTIME)
 THROTTLE = 5.0
 #: s (wall): period of the /diagnostics messages.
 DIAGNOSTICS_PERIOD = 1.0
+#: s (wall): how often a node that waits for the recorder checks the graph, and
+#: how long it waits at most before it publishes anyway (``wait_for_recorder``).
+RECORDER_POLL = 0.02
+RECORDER_WAIT = 10.0
 #: DiagnosticStatus levels as ints (the message field is a byte).
 OK, WARN, ERROR = 0, 1, 2
 
@@ -555,7 +560,10 @@ class SafePublisher:
         self.published = 0
 
     def publish(self, msg: Any) -> bool:
-        """Publish ``msg`` if it is finite, else its safe replacement; True if ``msg`` went."""
+        """Publish ``msg`` if it is finite, else its safe replacement; True if ``msg`` went
+        (or is held until the recorder reads this topic, see ``wait_for_recorder``)."""
+        if self.node.hold_output(self, msg):
+            return True
         if message_is_finite(msg):
             self.publisher.publish(msg)
             self.published += 1
@@ -614,6 +622,25 @@ class TiltrovNode(Node):
         self._reject_log: dict[tuple[str, str], tuple[int, int]] = {}
         self._rejected_at_last_report = 0
         self._safe_publishers: list[SafePublisher] = []
+        # Lockstep with a recorder (the launcher sets it with --record): hold this
+        # node's outputs, in order, until the recorder reads every one of its topics.
+        # The stack's writers are VOLATILE, so what goes out before the recorder has
+        # matched a writer is not recorded; a node started again mid-run (--respawn)
+        # is otherwise discovered by the plant first and by the recorder up to
+        # seconds later (no multicast), while lockstep runs on.
+        descriptor = ParameterDescriptor(
+            description='name of the bag recorder node: publish nothing until it reads '
+                        'every topic of this node (at most RECORDER_WAIT s); empty: do '
+                        'not wait. tiltrov launch --record sets it in lockstep.',
+            read_only=True)
+        self.recorder_node = str(
+            self.declare_parameter('wait_for_recorder', '', descriptor).value)
+        self._held: list[tuple[SafePublisher, Any]] = []
+        self._holding = bool(self.recorder_node)
+        self._hold_since = time.monotonic()
+        self._hold_timer = (self.create_timer(RECORDER_POLL, self._check_recorder,
+                                              clock=self.steady)
+                            if self._holding else None)
 
     def declare_parameter(self, name: str, value: Any = None,
                           descriptor: ParameterDescriptor | None = None,
@@ -756,6 +783,45 @@ class TiltrovNode(Node):
         pub = SafePublisher(self, msg_type, topic, qos, safe)
         self._safe_publishers.append(pub)
         return pub
+
+    def hold_output(self, publisher: SafePublisher, msg: Any) -> bool:
+        """Keep ``msg`` for later while waiting for the recorder; True if kept."""
+        if self._holding:
+            self._held.append((publisher, msg))
+        return self._holding
+
+    def recorder_reads_every_topic(self) -> bool:
+        """The recorder's subscription is in the graph on every guarded topic of this
+        node, and every subscription there is matched with this node's writer."""
+        for pub in self._safe_publishers:
+            infos = self.get_subscriptions_info_by_topic(pub.publisher.topic_name)
+            if not any(info.node_name == self.recorder_node for info in infos):
+                return False
+            if pub.get_subscription_count() < len(infos):
+                return False
+        return True
+
+    def _check_recorder(self) -> None:
+        waited = time.monotonic() - self._hold_since
+        ready = self.recorder_reads_every_topic()
+        if not ready and waited < RECORDER_WAIT:
+            return
+        if self._hold_timer is not None:
+            self._hold_timer.cancel()
+            self.destroy_timer(self._hold_timer)
+            self._hold_timer = None
+        self._holding = False
+        held, self._held = self._held, []
+        if ready:
+            self.get_logger().info(f'{self.recorder_node} reads every topic of this node '
+                                   f'after {waited:.2f} s; publishing {len(held)} held '
+                                   'messages')
+        else:
+            self.get_logger().warning(f'{self.recorder_node} does not read every topic of '
+                                      f'this node after {waited:.0f} s; publishing anyway '
+                                      f'({len(held)} held messages)')
+        for pub, msg in held:
+            pub.publish(msg)
 
     def unsafe_output(self, topic: str) -> None:
         """Count and log an outgoing message withheld for a non-finite value."""
