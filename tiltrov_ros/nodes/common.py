@@ -889,6 +889,16 @@ class TiltrovNode(Node):
         self.get_logger().warning(f'parameter change rejected: {reason}')
         return SetParametersResult(successful=False, reason=reason)
 
+    def check_failed_thrusters(self, parameters: list[Parameter]) -> SetParametersResult:
+        """The verdict on a change that may set ``failed_thrusters`` (plant, allocator)."""
+        for p in parameters:
+            if p.name == 'failed_thrusters':
+                try:
+                    validation.failed_thruster_indices(p.value)
+                except ParameterError as exc:
+                    return self.reject(str(exc))
+        return SetParametersResult(successful=True)
+
 
 def _text(value: Any) -> str:
     if isinstance(value, float):

@@ -521,13 +521,7 @@ class PlantSimulator(TiltrovNode):
     # -- parameters ------------------------------------------------------------------
 
     def _validate_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
-        for p in parameters:
-            if p.name == 'failed_thrusters':
-                try:
-                    failed_thruster_indices(p.value)
-                except ParameterError as exc:
-                    return self.reject(str(exc))
-        return SetParametersResult(successful=True)
+        return self.check_failed_thrusters(parameters)
 
     def _apply_parameters(self, parameters: list[Parameter]) -> None:
         """Run-time changes (ranges, types and read-only are checked by rclpy)."""

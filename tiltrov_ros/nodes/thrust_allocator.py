@@ -215,12 +215,9 @@ class ThrustAllocatorNode(TiltrovNode):
             {key: self.get_parameter(key).value for key in ALLOCATOR_KEYS})
 
     def _validate_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
-        for p in parameters:
-            if p.name == 'failed_thrusters':
-                try:
-                    failed_thruster_indices(p.value)
-                except ParameterError as exc:
-                    return self.reject(str(exc))
+        verdict = self.check_failed_thrusters(parameters)
+        if not verdict.successful:
+            return verdict
         changes = {p.name: p.value for p in parameters if p.name in ALLOCATOR_KEYS}
         if not changes:
             return SetParametersResult(successful=True)
