@@ -246,20 +246,21 @@ def test_record_gives_a_bag_equal_to_the_headless_run(tmp_path: Path,
 
 
 @pytest.mark.slow
-def test_a_killed_allocator_is_respawned_and_the_loop_resumes(tmp_path: Path) -> None:
-    """kill -9 of the allocator mid-run (lockstep, recorded, --respawn allocator): the
-    plant keeps its state and waits at its tick (a stall, re-published), the new
-    allocator answers it, the run ends normally; the bag has every step and tick of
-    every node's topics, the allocator's included (the new allocator holds its
-    answers until the recorder reads its topics)."""
+@pytest.mark.parametrize('victim', ['thrust_allocator', 'wrench_controller'])
+def test_a_killed_node_is_respawned_and_the_loop_resumes(tmp_path: Path, victim: str) -> None:
+    """kill -9 of the allocator (or the controller) mid-run (lockstep, recorded,
+    --respawn): the plant keeps its state and waits at its tick (a stall,
+    re-published), the new process answers it, the run ends normally; the bag has
+    every step and tick of every node's topics, the restarted node's included (it
+    holds its answers until the recorder reads its topics)."""
     from tiltrov_ros.bag.bagfile import iter_raw
     from tiltrov_ros.bag.cdr import stamp_ns
 
     bag = tmp_path / 'bag'
     duration = 120.0           # some 8 s wall in lockstep: the kill lands mid-run
     process = subprocess.Popen(
-        _tiltrov('--duration', str(duration), '--record', str(bag), '--respawn',
-                 'thrust_allocator', '--stall-timeout', '0.5'),
+        _tiltrov('--duration', str(duration), '--record', str(bag), '--respawn', victim,
+                 '--stall-timeout', '0.5'),
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=tmp_path)
     lines: list[str] = []
     reader = threading.Thread(target=lambda: lines.extend(process.stdout or ()), daemon=True)
@@ -275,14 +276,14 @@ def test_a_killed_allocator_is_respawned_and_the_loop_resumes(tmp_path: Path) ->
             if line.startswith('[launch]') and 'started ' in line:
                 pids[line.split('started ')[1].split()[0]] = int(
                     line.rsplit('pid ', 1)[1].rstrip(')\n'))
-        os.kill(pids['thrust_allocator'], signal.SIGKILL)
+        os.kill(pids[victim], signal.SIGKILL)
         assert process.wait(timeout=120) == 0, ''.join(lines)
     finally:
         _cleanup(process, pids)
     reader.join(timeout=5)
     out = ''.join(lines)
-    assert f'thrust_allocator died (exit code {-signal.SIGKILL}); starting it again' in out
-    assert out.count('started thrust_allocator') == 2
+    assert f'{victim} died (exit code {-signal.SIGKILL}); starting it again' in out
+    assert out.count(f'started {victim}') == 2
     stalls = [float(line.split('stall at ')[1].split(' s:')[0]) for line in lines
               if 'stall at ' in line]
     assert stalls and 0.0 < stalls[0] < duration, out        # it waited mid-run
