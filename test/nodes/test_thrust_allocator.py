@@ -287,7 +287,7 @@ def test_wrench_watchdog_zero_thrust_when_stale_and_recovery(ros) -> None:
     assert ros.spin_until(_answered(probe, 1))
     held = list(probe['tilt_cmd'][-1].position)
     pubs['/clock'].publish(clock_msg(T0 + 300 * MS))
-    assert ros.spin_until(lambda: allocator.wrench_stale and len(probe['thrust_cmd']) > 1
+    assert ros.spin_until(lambda: allocator.wrench_watchdog.stale and len(probe['thrust_cmd']) > 1
                           and len(probe['tilt_cmd']) > 1)
     zero, tilts = probe['thrust_cmd'][-1], probe['tilt_cmd'][-1]
     assert list(zero.effort) == [0.0] * 4 and list(tilts.position) == held
@@ -295,7 +295,7 @@ def test_wrench_watchdog_zero_thrust_when_stale_and_recovery(ros) -> None:
     values = report(ros, probe, allocator)
     assert values['wrench_stale'] == 'True' and 'wrench_cmd stale' in values['_message']
     pubs['wrench_cmd'].publish(wrench(T0 + 300 * MS, W2))
-    assert ros.spin_until(lambda: not allocator.wrench_stale)
+    assert ros.spin_until(lambda: not allocator.wrench_watchdog.stale)
     assert ros.spin_until(lambda: np.any(effort_rows(probe['thrust_cmd'][-1:]) != 0.0))
     count = len(probe['thrust_cmd'])
     ros.spin_for(0.15)

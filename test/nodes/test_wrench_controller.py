@@ -319,7 +319,7 @@ def test_odom_watchdog_zero_wrench_when_stale_and_recovery(ros) -> None:
     # Sim time runs on without odometry: within one control period past the timeout
     # the controller publishes a zero wrench and says so.
     pubs['/clock'].publish(clock_msg(T0 + 300 * MS))
-    assert ros.spin_until(lambda: controller.odom_stale and len(probe['wrench_cmd']) > 1)
+    assert ros.spin_until(lambda: controller.odom_watchdog.stale and len(probe['wrench_cmd']) > 1)
     zero = probe['wrench_cmd'][-1]
     assert stamp_ns(zero.header.stamp) > T0 and np.all(wrench_rows([zero]) == 0.0)
     values = report(ros, probe, controller)
@@ -327,7 +327,7 @@ def test_odom_watchdog_zero_wrench_when_stale_and_recovery(ros) -> None:
     # Fresh odometry: the control law again, the watchdog quiet.
     pubs['odom'].publish(_odom(T0 + 300 * MS))
     assert ros.spin_until(lambda: T0 + 300 * MS in probe.stamps('wrench_cmd'))
-    assert not controller.odom_stale
+    assert not controller.odom_watchdog.stale
     assert np.any(wrench_rows([probe.by_stamp('wrench_cmd')[T0 + 300 * MS]]) != 0.0)
     count = len(probe['wrench_cmd'])
     ros.spin_for(0.15)

@@ -70,6 +70,7 @@ from .common import (
     WRENCH_ACHIEVED,
     WRENCH_CMD,
     FloatArray,
+    InputWatchdog,
     Overrides,
     TiltrovNode,
     declare_failed_thrusters,
@@ -158,9 +159,9 @@ class ThrustAllocatorNode(TiltrovNode):
         self.clipped = 0
         self._handling: int | None = None     # stamp of the wrench being handled
         self.resets = 0
-        self._wrench_seen: tuple[int, int] | None = None    # (stamp, steady ns) newest
-        self.wrench_stale = False
-        self.stale_events = 0
+        self.wrench_watchdog = InputWatchdog(
+            self, WRENCH_CMD, 'wrench_timeout',
+            'commanding zero thrust until a fresh one comes', 'allocation resumes')
         self.watchdog_outputs = 0
         #: Ticks at which each wrench component was not achieved; the last shortfall.
         self.unachieved: Counter[str] = Counter()
@@ -279,7 +280,7 @@ class ThrustAllocatorNode(TiltrovNode):
         ns = self.check_header(msg.header, FRAME_BODY)
         if ns == self._last_ns and self._last_msgs is not None:
             self.republished += 1
-            self._mark_fresh(ns)
+            self.wrench_watchdog.fresh(ns)
             self._publish(*self._last_msgs)
             return
         if ns < self._last_ns:
@@ -287,7 +288,7 @@ class ThrustAllocatorNode(TiltrovNode):
                         f'{format_ns(ns)}')
         wrench = wrench_array(msg)
         check_finite(wrench, 'wrench')
-        self._mark_fresh(ns)
+        self.wrench_watchdog.fresh(ns)
         self._handling = ns
         clipped, changed = clip_wrench(wrench)
         if changed:
@@ -449,29 +450,12 @@ class ThrustAllocatorNode(TiltrovNode):
 
     # -- watchdog --------------------------------------------------------------------
 
-    def _mark_fresh(self, ns: int) -> None:
-        self._wrench_seen = (ns, self.steady_ns())
-        if self.wrench_stale:
-            self.wrench_stale = False
-            self.get_logger().info(f'wrench_cmd fresh again (stamped {format_ns(ns)}): '
-                                   'allocation resumes')
-
     @guarded
     def _wrench_watchdog(self) -> None:
         """Zero thrust, tilts held, while wrench_cmd is stale (not cached)."""
-        seen = self._wrench_seen
-        if seen is None or self.wrench_timeout <= 0:
+        seen = self.wrench_watchdog.expired(self.wrench_timeout)
+        if seen is None:
             return
-        age = self.input_age_ns(*seen)
-        if age <= to_ns(self.wrench_timeout):
-            return
-        if not self.wrench_stale:
-            self.wrench_stale = True
-            self.stale_events += 1
-            self.get_logger().warning(
-                f'wrench_cmd is stale: the newest (stamped {format_ns(seen[0])}) is '
-                f'{age / 1e9:.3f} s old (wrench_timeout {self.wrench_timeout:g} s); '
-                'commanding zero thrust until a fresh one comes')
         self.watchdog_outputs += 1
         self._publish(*self._safe_msgs(self.estimated_now_ns(*seen, to_ns(self.control_period))))
 
@@ -495,7 +479,7 @@ class ThrustAllocatorNode(TiltrovNode):
                 message += ('; not achieved (ticks): ' + ', '.join(
                     f'{dof} {self.unachieved[dof]}' for dof in WRENCH_DOFS
                     if self.unachieved[dof]))
-        if self.wrench_stale:
+        if self.wrench_watchdog.stale:
             level = WARN
             message = (f'wrench_cmd stale (older than wrench_timeout '
                        f'{self.wrench_timeout:g} s): zero thrust; ' + message)
@@ -514,7 +498,8 @@ class ThrustAllocatorNode(TiltrovNode):
             'failed_thrusters': [i + 1 for i in self.failed],
             'unachieved_ticks': {dof: self.unachieved[dof] for dof in WRENCH_DOFS},
             'last_shortfall': [float(v) for v in self.last_shortfall],
-            'wrench_stale': self.wrench_stale, 'wrench_stale_events': self.stale_events,
+            'wrench_stale': self.wrench_watchdog.stale,
+            'wrench_stale_events': self.wrench_watchdog.events,
             'watchdog_zero_thrusts': self.watchdog_outputs,
         }
 

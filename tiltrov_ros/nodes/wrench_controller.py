@@ -74,6 +74,7 @@ from .common import (
     WARN,
     WRENCH_CMD,
     FloatArray,
+    InputWatchdog,
     Overrides,
     TiltrovNode,
     cdr_stamp_ns,
@@ -190,9 +191,9 @@ class WrenchController(TiltrovNode):
         self.safe_answers = 0
         self.resets = 0
         self.last_mode = ''
-        self._odom_seen: tuple[int, int] | None = None     # (stamp, steady ns) of the newest
-        self.odom_stale = False
-        self.stale_events = 0
+        self.odom_watchdog = InputWatchdog(
+            self, ODOM, 'odom_timeout', 'publishing a zero wrench until fresh odometry returns',
+            'control resumes')
         self.watchdog_outputs = 0
 
         if self.lockstep:
@@ -298,11 +299,7 @@ class WrenchController(TiltrovNode):
         check_quaternion(quaternion)
         check_finite(nu, 'twist')
         now = self.steady_ns()
-        self._odom_seen = (ns, now)
-        if self.odom_stale:
-            self.odom_stale = False
-            self.get_logger().info(f'odom fresh again (stamped {format_ns(ns)}): control '
-                                   'resumes')
+        self.odom_watchdog.fresh(ns, now)
         self._tick = _Tick(ns, position, quaternion, nu, now)
         self._try_compute()
 
@@ -403,19 +400,9 @@ class WrenchController(TiltrovNode):
     def _odom_watchdog(self) -> None:
         """realtime: a zero wrench while odom is stale (not cached: the next fresh
         tick is computed as usual)."""
-        seen = self._odom_seen
-        if seen is None or self.odom_timeout <= 0:
+        seen = self.odom_watchdog.expired(self.odom_timeout)
+        if seen is None:
             return
-        age = self.input_age_ns(*seen)
-        if age <= to_ns(self.odom_timeout):
-            return
-        if not self.odom_stale:
-            self.odom_stale = True
-            self.stale_events += 1
-            self.get_logger().warning(
-                f'odom is stale: the newest (stamped {format_ns(seen[0])}) is '
-                f'{age / 1e9:.3f} s old (odom_timeout {self.odom_timeout:g} s); publishing a '
-                'zero wrench until fresh odometry returns')
         self.watchdog_outputs += 1
         ns = self.estimated_now_ns(*seen, self.period_ns)
         self._publish(fill_wrench(new_wrench(), ns, np.zeros(6)),
@@ -462,7 +449,7 @@ class WrenchController(TiltrovNode):
     def diagnostic_status(self) -> tuple[int, str, dict[str, Any]]:
         level, message = OK, f'{self.kind}: {self.ticks} ticks'
         tick = self._tick
-        if self.odom_stale:
+        if self.odom_watchdog.stale:
             level = WARN
             message = (f'odom stale (older than odom_timeout {self.odom_timeout:g} s): '
                        'publishing a zero wrench')
@@ -480,8 +467,8 @@ class WrenchController(TiltrovNode):
             'republished': self.republished, 'setpoint_waits': self.setpoint_waits,
             'velocity_timeouts': self.velocity_timeouts,
             'ticks_without_setpoint': self.no_setpoint, 'safe_answers': self.safe_answers,
-            'resets': self.resets, 'odom_stale': self.odom_stale,
-            'odom_stale_events': self.stale_events,
+            'resets': self.resets, 'odom_stale': self.odom_watchdog.stale,
+            'odom_stale_events': self.odom_watchdog.events,
             'watchdog_zero_wrenches': self.watchdog_outputs,
         }
 
