@@ -40,9 +40,6 @@ import time
 from typing import Any
 
 from rcl_interfaces.msg import (
-    FloatingPointRange,
-    IntegerRange,
-    ParameterDescriptor,
     SetParametersResult,
 )
 import rclpy
@@ -66,6 +63,7 @@ from ..bag.qos import matches, subscription_qos, to_bag_qos
 from ..bag.topics import CLOCK_TOPIC, STACK_TOPICS, is_hidden, normalize_type
 from ..bag.writer import COMPRESSIONS, BagWriter
 from ..core.errors import BagError, ParameterError, TiltrovError
+from .common import descriptor
 
 NODE_NAME = 'bag_recorder'
 VERSION_KEY = 'tiltrov.version'
@@ -97,19 +95,8 @@ class RecorderConfig:
     run_info: str
 
 
-def _descriptor(description: str, *, read_only: bool = True,
-                floating: tuple[float, float] | None = None,
-                integer: tuple[int, int] | None = None,
-                constraints: str = '') -> ParameterDescriptor:
-    descriptor = ParameterDescriptor(description=description, read_only=read_only,
-                                     additional_constraints=constraints)
-    if floating is not None:
-        descriptor.floating_point_range = [
-            FloatingPointRange(from_value=floating[0], to_value=floating[1], step=0.0)]
-    if integer is not None:
-        descriptor.integer_range = [
-            IntegerRange(from_value=integer[0], to_value=integer[1], step=1)]
-    return descriptor
+#: The recorder's parameters are read-only unless declared otherwise.
+_descriptor = functools.partial(descriptor, read_only=True)
 
 
 def declare_parameters(node: Node) -> RecorderConfig:

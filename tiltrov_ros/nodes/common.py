@@ -673,13 +673,10 @@ class TiltrovNode(Node):
         # matched a writer is not recorded; a node started again mid-run (--respawn)
         # is otherwise discovered by the plant first and by the recorder up to
         # seconds later (no multicast), while lockstep runs on.
-        descriptor = ParameterDescriptor(
-            description='name of the bag recorder node: publish nothing until it reads '
-                        'every topic of this node (at most RECORDER_WAIT s); empty: do '
-                        'not wait. tiltrov launch --record sets it in lockstep.',
-            read_only=True)
-        self.recorder_node = str(
-            self.declare_parameter('wait_for_recorder', '', descriptor).value)
+        self.recorder_node = str(self.declare_parameter('wait_for_recorder', '', descriptor(
+            'name of the bag recorder node: publish nothing until it reads every topic of '
+            'this node (at most RECORDER_WAIT s); empty: do not wait. tiltrov launch '
+            '--record sets it in lockstep.', read_only=True)).value)
         self._held: list[tuple[SafePublisher, Any]] = []
         self._holding = bool(self.recorder_node)
         self._hold_since = time.monotonic()
