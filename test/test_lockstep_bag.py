@@ -156,8 +156,8 @@ def test_a_120_s_lockstep_run_is_recorded_without_losing_a_message(tmp_path: Pat
     The publishers' side is counted from the run's definition: the plant
     publishes odom, joint_states and /clock at t = 0, 0.01, ..., 120 s (12 001
     each); the reference, the controller and the allocator once per 50 ms
-    control tick (2 400 each); and the bag equals the headless run sample for
-    sample, so no message is lost or duplicated.
+    control tick (2 400 each); the bag holds exactly these counts, and the RunLog
+    read from it misses no value, so no message is lost or duplicated.
     """
     bag = tmp_path / 'bag'
     result = subprocess.run(
