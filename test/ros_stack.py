@@ -18,8 +18,8 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
-from tiltrov_ros import launcher
 from tiltrov_ros.nodes.common import stamp_ns
+from tiltrov_ros.stack import supervisor as launcher
 
 NS = 1_000_000_000
 MS = 1_000_000

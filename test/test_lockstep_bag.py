@@ -20,14 +20,15 @@ import numpy as np
 import pytest
 from ros_stack import Probe, effort_rows
 
-from tiltrov_ros import cli, launcher
+from tiltrov_ros import cli
+from tiltrov_ros.analysis.reallocate import compare, read_control
 from tiltrov_ros.bag.bagfile import iter_raw
 from tiltrov_ros.bag.cdr import stamp_ns
 from tiltrov_ros.bag.reader import read_runlog
 from tiltrov_ros.core.metrics import metric_differences
 from tiltrov_ros.core.timebase import to_ns
-from tiltrov_ros.launcher import LaunchOptions
-from tiltrov_ros.reallocate import compare, read_control
+from tiltrov_ros.stack import supervisor as launcher
+from tiltrov_ros.stack.supervisor import LaunchOptions
 
 SCENARIO = 'pitch_hold'
 DURATION = '5'          # s of sim time: 501 plant steps, 100 control ticks

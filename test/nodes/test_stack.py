@@ -20,10 +20,10 @@ from ros_stack import (
     wrench_rows,
 )
 
-from tiltrov_ros import launcher
 from tiltrov_ros.core.runner import run_scenario, stack_config
 from tiltrov_ros.nodes.common import make_executor
 from tiltrov_ros.paths import config_file
+from tiltrov_ros.stack import supervisor as launcher
 
 ATOL = 1e-9
 STEP = 10 * MS

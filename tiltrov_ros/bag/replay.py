@@ -16,7 +16,7 @@ reliability and durability (see :mod:`.qos`).
 
 ``--through allocator`` replays offline instead, without ROS: the recorded
 ``wrench_cmd`` through the allocator in both modes, compared with the recorded
-answers (:mod:`tiltrov_ros.reallocate`); bad input ends with one line on
+answers (:mod:`tiltrov_ros.analysis.reallocate`); bad input ends with one line on
 stderr and exit code 2, as ``tiltrov analyze``.
 """
 
@@ -263,8 +263,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _through(args: argparse.Namespace) -> int:
     """``--through allocator``: offline, no rclpy."""
-    from ..reallocate import check_options, reallocate, summary_lines
-    from ..simulate import print_written, report_errors
+    from tiltrov_ros.analysis.reallocate import check_options, reallocate, summary_lines
+    from tiltrov_ros.analysis.runs import print_written, report_errors
 
     live = {'--rate': args.rate != 1.0, '--topics': bool(args.topics),
             '--remap': bool(args.remap), '--clock': args.clock,

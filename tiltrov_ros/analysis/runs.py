@@ -9,7 +9,7 @@
 One run writes into ``--out``: ``run.npz`` (the whole RunLog,
 :meth:`RunLog.save_npz`), ``control.csv`` (the control grid, one row per tick,
 for spreadsheets), ``metrics.json`` (:func:`tiltrov_ros.core.metrics.
-compute_metrics`) and the figures of :mod:`tiltrov_ros.figures`. With
+compute_metrics`) and the figures of :mod:`tiltrov_ros.analysis.figures`. With
 ``--compare`` each controller's data go into ``--out/<controller>/`` and the
 figures, runs overlaid, into ``--out``.
 
@@ -172,7 +172,7 @@ def _run(args: argparse.Namespace) -> list[Path]:
         written += paths
         print(summary_line(metrics))
     if not args.no_figures:
-        from tiltrov_ros.figures import write_figures
+        from tiltrov_ros.analysis.figures import write_figures
         written += write_figures(logs, out, dpi=args.dpi)
     return written
 
@@ -207,7 +207,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run as ``python -m tiltrov_ros.simulate`` (same as ``tiltrov sim``)."""
+    """Run as ``python -m tiltrov_ros.analysis.runs`` (same as ``tiltrov sim``)."""
     parser = argparse.ArgumentParser(prog='tiltrov sim')
     add_arguments(parser)
     return run(parser.parse_args(argv))

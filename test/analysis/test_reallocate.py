@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from tiltrov_ros import cli
+from tiltrov_ros.analysis.reallocate import AllocatorSettings, compare, read_control
 from tiltrov_ros.bag.bagfile import RUN_INFO_KEY
 from tiltrov_ros.bag.export import _Messages, write_runlog_bag
 from tiltrov_ros.bag.writer import BagWriter
@@ -27,7 +28,6 @@ from tiltrov_ros.core.metrics import compute_metrics
 from tiltrov_ros.core.params import load_robot_params
 from tiltrov_ros.core.runlog import RunLog
 from tiltrov_ros.core.runner import run_scenario, stack_config
-from tiltrov_ros.reallocate import AllocatorSettings, compare, read_control
 
 
 @cache

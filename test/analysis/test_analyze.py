@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from tiltrov_ros import cli
-from tiltrov_ros.analyze import analyze, bag_names, run_labels, unique_names
+from tiltrov_ros.analysis.analyze import analyze, bag_names, run_labels, unique_names
 from tiltrov_ros.bag.export import write_runlog_bag
 from tiltrov_ros.bag.writer import BagWriter
 from tiltrov_ros.core.metrics import compute_metrics
@@ -81,7 +81,7 @@ def test_several_bags_each_in_its_folder_with_an_index_and_overlaid_figures(
 
 
 def test_labels_come_from_run_info_else_from_the_bag_name(tmp_path: Path) -> None:
-    from tiltrov_ros.analyze import Recording, read_bag
+    from tiltrov_ros.analysis.analyze import Recording, read_bag
 
     pd, pid = headless('pd'), headless('pid')
     paths = [write_runlog_bag(pd, tmp_path / 'a'),

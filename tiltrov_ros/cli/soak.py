@@ -29,8 +29,8 @@ import sys
 import time
 from typing import Any
 
-from tiltrov_ros import launcher
 from tiltrov_ros.core.controllers import CONTROLLER_KINDS
+from tiltrov_ros.stack import supervisor as launcher
 
 #: s (wall) the other nodes keep running after the plant's end: one more
 #: /diagnostics round (every 1 s) carries their final counts to the recorder.

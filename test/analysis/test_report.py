@@ -8,12 +8,12 @@ import re
 
 import pytest
 
+from tiltrov_ros.analysis.report import BEGIN, END, RUNS, caption, fmt, update_readme
+from tiltrov_ros.analysis.runs import InputError
 from tiltrov_ros.cli import main
 from tiltrov_ros.core.controllers import load_controller_config
-from tiltrov_ros.report import BEGIN, END, RUNS, caption, fmt, update_readme
-from tiltrov_ros.simulate import InputError
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 
 
 @pytest.mark.parametrize(('value', 'text'), [

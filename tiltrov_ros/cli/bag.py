@@ -9,8 +9,8 @@ from __future__ import annotations
 import argparse
 import json
 
-from ..core.errors import BagError
-from ..core.timebase import seconds
+from tiltrov_ros.core.errors import BagError
+from tiltrov_ros.core.timebase import seconds
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -37,7 +37,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _info(path: str) -> int:
-    from .bagfile import bag_info
+    from tiltrov_ros.bag.bagfile import bag_info
 
     info = bag_info(path)
     print(f'bag:       {info.path}')
@@ -52,7 +52,7 @@ def _info(path: str) -> int:
 
 
 def _repair(path: str, *, force: bool) -> int:
-    from .repair import repair
+    from tiltrov_ros.bag.repair import repair
 
     result = repair(path, force=force)
     if not result.backups:

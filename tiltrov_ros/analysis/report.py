@@ -27,6 +27,7 @@ from pathlib import Path
 import sys
 from typing import Any
 
+from tiltrov_ros.analysis.runs import InputError, one_line, resolve, simulate
 from tiltrov_ros.core.controllers import DOF_NAMES, ControllerConfig
 from tiltrov_ros.core.metrics import (
     FINAL_WINDOW,
@@ -35,7 +36,6 @@ from tiltrov_ros.core.metrics import (
 )
 from tiltrov_ros.core.runlog import RunLog
 from tiltrov_ros.core.runner import StackConfig
-from tiltrov_ros.simulate import InputError, one_line, resolve, simulate
 
 BEGIN = '<!-- results:begin -->'
 END = '<!-- results:end -->'
@@ -45,7 +45,7 @@ RUNS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ('pitch_hold_slow_servo', ('pd', 'pid')),
     ('trajectory', ('pd', 'pid', 'switching')),
 )
-#: figures per scenario (names of tiltrov_ros.figures), and which runs get a wrench figure.
+#: figures per scenario (names of tiltrov_ros.analysis.figures), and which runs get a wrench figure.
 FIGURES: dict[str, tuple[str, ...]] = {
     'pitch_hold': ('errors', 'tilts'),
     'pitch_hold_slow_servo': ('errors', 'tilts'),
@@ -272,7 +272,7 @@ def _runs(duration: float | None) -> list[tuple[StackConfig, RunLog]]:
 
 
 def _figures(runs: list[tuple[StackConfig, RunLog]], out: Path, dpi: int) -> list[Path]:
-    from tiltrov_ros.figures import write_figures
+    from tiltrov_ros.analysis.figures import write_figures
     written: list[Path] = []
     for scenario, _ in RUNS:
         logs = [log for config, log in runs if config.scenario.name == scenario]

@@ -25,16 +25,16 @@ COMMANDS: dict[str, Command] = {
                              '(bag, figures, metrics)'),
     'bench': Command('.bench', 'run the benchmarks of a source checkout (speed ratios '
                                'against baselines measured in the same run)'),
-    'bag': Command('.bag.cli', 'look into a bag (info) or repair one whose recorder was killed'),
-    'replay': Command('.bag.replay', 'publish a recorded bag into a live graph'),
-    'sim': Command('.simulate', 'run a scenario headless (no ROS): time series, metrics.json, '
-                                'figures'),
-    'report': Command('.report', "run the paper's scenarios with every controller; results "
-                                 'table and figures into README.md'),
-    'analyze': Command('.analyze', 'metrics.json and figures of recorded runs (bags)'),
+    'bag': Command('.bag', 'look into a bag (info) or repair one whose recorder was killed'),
+    'replay': Command('..bag.replay', 'publish a recorded bag into a live graph'),
+    'sim': Command('..analysis.runs', 'run a scenario headless (no ROS): time series, '
+                                      'metrics.json, figures'),
+    'report': Command('..analysis.report', "run the paper's scenarios with every controller; "
+                                           'results table and figures into README.md'),
+    'analyze': Command('..analysis.analyze', 'metrics.json and figures of recorded runs (bags)'),
     'soak': Command('.soak', 'one hour of simulated time in lockstep, recorded: RSS of each '
                              'process, messages published vs recorded, stalls'),
-    'launch': Command('.launcher', 'start the ROS stack (plant, controller, allocator, '
+    'launch': Command('..stack.supervisor', 'start the ROS stack (plant, controller, allocator, '
                                    'reference) for a scenario, lockstep or realtime'),
 }
 
@@ -66,6 +66,3 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         return 130
 
-
-if __name__ == '__main__':
-    sys.exit(main())

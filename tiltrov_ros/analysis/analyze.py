@@ -9,10 +9,10 @@
 Each bag is read into a :class:`~tiltrov_ros.core.runlog.RunLog` by
 :func:`tiltrov_ros.bag.read_runlog` (header stamps, the stamp contract of
 ARCHITECTURE.md), and from there everything is what ``tiltrov sim`` does with
-the RunLog of a headless run: :func:`tiltrov_ros.simulate.write_run`
+the RunLog of a headless run: :func:`tiltrov_ros.analysis.runs.write_run`
 (``run.npz``, ``control.csv``, ``metrics.json`` from
 :func:`tiltrov_ros.core.metrics.compute_metrics`) and
-:func:`tiltrov_ros.figures.write_figures`. So a lockstep bag and ``tiltrov sim``
+:func:`tiltrov_ros.analysis.figures.write_figures`. So a lockstep bag and ``tiltrov sim``
 of the same scenario give the same ``metrics.json``.
 
 One bag: its files and figures go into ``--out``. Several bags: each bag's
@@ -35,10 +35,7 @@ from pathlib import Path
 import sys
 from typing import Any
 
-from tiltrov_ros.core.errors import BagError, TiltrovError
-from tiltrov_ros.core.metrics import write_metrics
-from tiltrov_ros.core.runlog import RunLog
-from tiltrov_ros.simulate import (
+from tiltrov_ros.analysis.runs import (
     InputError,
     one_line,
     print_written,
@@ -46,6 +43,9 @@ from tiltrov_ros.simulate import (
     summary_line,
     write_run,
 )
+from tiltrov_ros.core.errors import BagError, TiltrovError
+from tiltrov_ros.core.metrics import write_metrics
+from tiltrov_ros.core.runlog import RunLog
 
 #: The topics (relative to the stack's namespace) without which a bag is not a
 #: recording of the stack: the plant grid and the control grid.
@@ -147,7 +147,7 @@ def run_labels(recordings: Sequence[Recording]) -> list[str]:
     """Legend text of each run: from its run_info (controller, a non-default
     allocator, the scenario when the runs differ in it), else the bag's name;
     the bag's name is appended where two labels would be equal."""
-    from tiltrov_ros.figures import run_label
+    from tiltrov_ros.analysis.figures import run_label
 
     scenarios = {r.log.meta.get('scenario') for r in recordings}
     labels = []
@@ -212,7 +212,7 @@ def analyze(bags: Sequence[str | Path], out: Path, *, namespace: str | None = No
     if not single:
         result.written.append(write_metrics(result.metrics, out / 'metrics.json'))
     if figures:
-        from tiltrov_ros.figures import write_figures
+        from tiltrov_ros.analysis.figures import write_figures
 
         result.written += write_figures([r.log for r in recordings], out,
                                         labels=run_labels(recordings), dpi=dpi)
@@ -246,7 +246,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run as ``python -m tiltrov_ros.analyze`` (same as ``tiltrov analyze``)."""
+    """Run as ``python -m tiltrov_ros.analysis.analyze`` (same as ``tiltrov analyze``)."""
     parser = argparse.ArgumentParser(prog='tiltrov analyze')
     add_arguments(parser)
     return run(parser.parse_args(argv))

@@ -45,6 +45,7 @@ from typing import Any
 
 import numpy as np
 
+from tiltrov_ros.analysis.runs import InputError, one_line
 from tiltrov_ros.core.allocation import (
     AllocatorConfig,
     BatchResult,
@@ -58,7 +59,6 @@ from tiltrov_ros.core.metrics import SATURATION_RTOL
 from tiltrov_ros.core.params import RobotParams, load_control_period, load_robot_params
 from tiltrov_ros.core.runlog import FloatArray
 from tiltrov_ros.core.timebase import seconds
-from tiltrov_ros.simulate import InputError, one_line
 
 MODES = ('paper', 'robust')
 ALLOCATIONS = ('recorded', *MODES)
@@ -295,7 +295,7 @@ def reallocate(bag: str | Path, out: Path, *, namespace: str | None = None,
                                        allow_nan=False) + '\n', encoding='utf-8')
     written = [summary_path, write_csv(comparison, out / 'allocation.csv')]
     if figure:
-        from tiltrov_ros.figures import allocation_figure, save
+        from tiltrov_ros.analysis.figures import allocation_figure, save
 
         title = ' '.join(str(v) for v in comparison.summary['run'].values() if v) or Path(bag).name
         written.append(save(allocation_figure(control.t, comparison.weighted_error,

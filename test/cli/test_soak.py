@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from tiltrov_ros import soak
+from tiltrov_ros.cli import soak
 
 
 @pytest.mark.slow

@@ -84,7 +84,7 @@ def _say(text: str) -> None:
 
 def record_run(controller: str, args: argparse.Namespace, bag: Path, log_path: Path) -> int:
     """One recorded lockstep launch; the launcher's exit code."""
-    from tiltrov_ros.launcher import LaunchOptions, launch
+    from tiltrov_ros.stack.supervisor import LaunchOptions, launch
 
     options = LaunchOptions(scenario=args.scenario, controller=controller,
                             duration=args.duration, record=bag,
@@ -127,7 +127,7 @@ def summary_table(metrics: dict[str, dict[str, Any]]) -> str:
 
 
 def _demo(args: argparse.Namespace) -> int:
-    from tiltrov_ros.analyze import analyze
+    from tiltrov_ros.analysis.analyze import analyze
 
     controllers = parse_controllers(args.controllers)
     if args.duration is not None and not args.duration > 0:
@@ -208,7 +208,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run as ``python -m tiltrov_ros.demo`` (same as ``tiltrov demo``)."""
+    """Run as ``python -m tiltrov_ros.cli.demo`` (same as ``tiltrov demo``)."""
     parser = argparse.ArgumentParser(prog='tiltrov demo')
     add_arguments(parser)
     return run(parser.parse_args(argv))

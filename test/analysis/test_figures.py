@@ -8,10 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tiltrov_ros.core.metrics import control_errors
-from tiltrov_ros.core.runlog import RunLog
-from tiltrov_ros.core.runner import run_scenario, stack_config
-from tiltrov_ros.figures import (
+from tiltrov_ros.analysis.figures import (
     errors_figure,
     run_label,
     tilts_figure,
@@ -19,6 +16,9 @@ from tiltrov_ros.figures import (
     wrench_figure,
     write_figures,
 )
+from tiltrov_ros.core.metrics import control_errors
+from tiltrov_ros.core.runlog import RunLog
+from tiltrov_ros.core.runner import run_scenario, stack_config
 
 
 @pytest.fixture(scope='module')

@@ -16,9 +16,9 @@ import pytest
 from ros_stack import MS, Probe
 import yaml
 
-from tiltrov_ros import launcher
 from tiltrov_ros.core.runner import run_scenario, stack_config
-from tiltrov_ros.launcher import LaunchError, LaunchOptions, stack_specs
+from tiltrov_ros.stack import supervisor as launcher
+from tiltrov_ros.stack.supervisor import LaunchError, LaunchOptions, stack_specs
 
 NODES = ('thrust_allocator', 'wrench_controller', 'reference_publisher', 'plant_simulator')
 
