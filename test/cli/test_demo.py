@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 from rosbags.rosbag2 import Reader
-from tiltrov_ros.cli.demo import summary_table
 
 from tiltrov_ros import cli
+from tiltrov_ros.cli.demo import summary_table
 
 
 @pytest.mark.slow

@@ -63,7 +63,7 @@ from ..bag.qos import matches, subscription_qos, to_bag_qos
 from ..bag.topics import CLOCK_TOPIC, STACK_TOPICS, is_hidden, normalize_type
 from ..bag.writer import COMPRESSIONS, BagWriter
 from ..core.errors import BagError, ParameterError, TiltrovError
-from .common import descriptor
+from .base import descriptor
 
 NODE_NAME = 'bag_recorder'
 VERSION_KEY = 'tiltrov.version'

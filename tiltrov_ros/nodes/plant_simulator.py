@@ -63,7 +63,7 @@ from tiltrov_ros.core.timebase import seconds, to_ns
 from tiltrov_ros.core.validation import InvalidInput, failed_thruster_indices
 from tiltrov_ros.core.validation import stamp_ns as checked_stamp_ns
 
-from .common import (
+from .base import (
     CLOCK,
     JOINT_STATES,
     LOCKSTEP,

@@ -33,7 +33,7 @@ from tiltrov_ros.core.scenarios import ReferenceProfile, load_scenario
 from tiltrov_ros.core.timebase import seconds, to_ns
 from tiltrov_ros.core.validation import stamp_ns as checked_stamp_ns
 
-from .common import (
+from .base import (
     CLOCK,
     CLOCK_READER_QOS,
     FRAME_EARTH,

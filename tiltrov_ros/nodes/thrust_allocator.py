@@ -55,7 +55,7 @@ from tiltrov_ros.core.validation import (
     limit_command,
 )
 
-from .common import (
+from .base import (
     FRAME_BODY,
     OK,
     PUBLISHER_QOS,

@@ -56,7 +56,7 @@ from tiltrov_ros.core.validation import (
     check_quaternion,
 )
 
-from .common import (
+from .base import (
     FRAME_BODY,
     FRAME_EARTH,
     LOCKSTEP,
