@@ -18,6 +18,8 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
+from tiltrov_ros.core import names
+from tiltrov_ros.core.names import PLANT
 from tiltrov_ros.nodes.base import stamp_ns
 from tiltrov_ros.stack import supervisor as launcher
 
@@ -162,8 +164,8 @@ class StackRun:
         return next(n for n, s in zip(self.nodes, self.specs) if s.name == name)
 
 
-STACK_TOPICS = ('odom', 'joint_states', '/clock', 'setpoint', 'setpoint_velocity',
-                'wrench_cmd', 'tilt_request', 'thrust_cmd', 'tilt_cmd', 'wrench_achieved')
+#: The stack's topics but /diagnostics.
+STACK_TOPICS = tuple(t for t in names.STACK_TOPICS if t != names.DIAGNOSTICS)
 
 
 def run_stack(context: Any, executor: Any, options: launcher.LaunchOptions, *,
@@ -185,7 +187,7 @@ def run_stack(context: Any, executor: Any, options: launcher.LaunchOptions, *,
     try:
         for node in (probe_node, *nodes):
             executor.add_node(node)
-        plant = run.node(launcher.PLANT)
+        plant = run.node(PLANT)
         assert spin(executor, plant.finished.done, timeout), (
             f'the plant stopped at {plant.plant.time_ns / NS} s of {duration} s')
         # The last messages: the state at the end reaches the probe.

@@ -38,7 +38,8 @@ from std_msgs.msg import String
 
 from tiltrov_ros.bag.bagfile import RUN_INFO_KEY
 from tiltrov_ros.core.errors import ParameterError
-from tiltrov_ros.nodes.bag_recorder import BagRecorder, clock_ns, recorder_command
+from tiltrov_ros.core.timebase import cdr_stamp_ns
+from tiltrov_ros.nodes.bag_recorder import BagRecorder, recorder_command
 from tiltrov_ros.paths import config_file
 
 
@@ -139,7 +140,7 @@ def test_log_time_is_sim_time_with_clock_handled_before_data(ros: Any, tmp_path:
         log = {topic: [] for topic in ('/clock', '/odom')}
         for conn, log_time, data in reader.messages():
             log[conn.topic].append((log_time, data))
-    assert [t for t, _ in log['/clock']] == [clock_ns(d) for _, d in log['/clock']]
+    assert [t for t, _ in log['/clock']] == [cdr_stamp_ns(d) for _, d in log['/clock']]
     assert [t for t, _ in log['/odom']] == [(1000 + i) * 10_000_000 for i in steps]
 
 

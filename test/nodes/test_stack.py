@@ -20,6 +20,7 @@ from ros_stack import (
     wrench_rows,
 )
 
+from tiltrov_ros.core.names import ALLOCATOR, CONTROLLER, PLANT
 from tiltrov_ros.core.runner import run_scenario, stack_config
 from tiltrov_ros.nodes.base import make_executor
 from tiltrov_ros.paths import config_file
@@ -87,7 +88,7 @@ def test_lockstep_odometry_equals_the_headless_run(ros, scenario: str, controlle
     # The switching baseline's tilt requests travel with the same stamps.
     if controller == 'switching':
         assert sorted(set(run.probe.stamps('tilt_request'))) == ticks
-        assert run.node(launcher.CONTROLLER).controller.switches >= 2
+        assert run.node(CONTROLLER).controller.switches >= 2
     else:
         assert run.probe['tilt_request'] == []
     assert run.extra['stalls'] == 0
@@ -158,7 +159,7 @@ def test_thruster_failure_lockstep_equals_the_headless_run_and_is_reported(
     np.testing.assert_allclose(position, log.position, rtol=0, atol=ATOL)
     assert all(thrust[t].effort[1] == 0.0 for t in ticks[20:])
 
-    allocator, plant = run.node(launcher.ALLOCATOR), run.node(launcher.PLANT)
+    allocator, plant = run.node(ALLOCATOR), run.node(PLANT)
     assert allocator.failed == (1,) and plant.plant.failed_thrusters == (1,)
     _, message, values = allocator.diagnostic_status()
     assert 'failed: thruster_2' in message and 'not achieved (ticks)' in message

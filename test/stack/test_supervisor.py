@@ -254,7 +254,7 @@ def test_a_killed_node_is_respawned_and_the_loop_resumes(tmp_path: Path, victim:
     every step and tick of every node's topics, the restarted node's included (it
     holds its answers until the recorder reads its topics)."""
     from tiltrov_ros.bag.bagfile import iter_raw
-    from tiltrov_ros.bag.cdr import stamp_ns
+    from tiltrov_ros.bag.cdr import leading_stamp_ns
 
     bag = tmp_path / 'bag'
     duration = 120.0           # some 8 s wall in lockstep: the kill lands mid-run
@@ -290,7 +290,7 @@ def test_a_killed_node_is_respawned_and_the_loop_resumes(tmp_path: Path, victim:
 
     stamps: dict[str, set[int]] = {}
     for raw in iter_raw(bag):
-        stamp = stamp_ns(raw.data, raw.msgtype)
+        stamp = leading_stamp_ns(raw.data, raw.msgtype)
         if stamp is not None:
             stamps.setdefault(raw.topic, set()).add(stamp // MS)
     steps = set(range(0, int(duration * 1000) + 1, 10))

@@ -45,6 +45,7 @@ from tiltrov_ros.analysis.runs import (
 )
 from tiltrov_ros.core.errors import BagError, TiltrovError
 from tiltrov_ros.core.metrics import write_metrics
+from tiltrov_ros.core.names import normalize_namespace
 from tiltrov_ros.core.runlog import RunLog
 
 #: The topics (relative to the stack's namespace) without which a bag is not a
@@ -99,14 +100,6 @@ def unique_names(names: Sequence[str]) -> list[str]:
             candidate = f'{name}_{k}'
         out.append(candidate)
     return out
-
-
-def normalize_namespace(namespace: str | None) -> str | None:
-    """``robot1`` and ``/robot1/`` -> ``/robot1``; ``''`` or ``/`` -> ``''``; None stays."""
-    if namespace is None:
-        return None
-    namespace = namespace.strip().strip('/')
-    return f'/{namespace}' if namespace else ''
 
 
 def read_bag(path: str | Path, *, namespace: str | None = None,
@@ -196,7 +189,7 @@ def analyze(bags: Sequence[str | Path], out: Path, *, namespace: str | None = No
     """
     if not bags:
         raise InputError('no bag given')
-    namespace = normalize_namespace(namespace)
+    namespace = None if namespace is None else normalize_namespace(namespace)
     try:
         names = bag_names(bags)
     except BagError as exc:

@@ -56,13 +56,23 @@ from tiltrov_ros.core.allocation import (
 )
 from tiltrov_ros.core.errors import BagError, TiltrovError
 from tiltrov_ros.core.metrics import SATURATION_RTOL
+from tiltrov_ros.core.names import (
+    SERVOS,
+    THRUST_CMD,
+    TILT_CMD,
+    TILT_REQUEST,
+    WRENCH_CMD,
+    WRENCH_DOFS,
+    WRENCH_UNITS,
+    join_namespace,
+)
 from tiltrov_ros.core.params import RobotParams, load_control_period, load_robot_params
 from tiltrov_ros.core.runlog import FloatArray
 from tiltrov_ros.core.timebase import seconds
 
-MODES = ('paper', 'robust')
-ALLOCATIONS = ('recorded', *MODES)
-SERVOS = ('front', 'rear')
+#: The recorded allocation and the re-runs in both allocator modes, in table order.
+ALLOCATIONS = ('recorded', 'paper', 'robust')
+RERUNS = ALLOCATIONS[1:]
 #: run_info keys that override the shipped robot parameters.
 ROBOT_KEYS = ('max_thrust', 'tilt_min', 'tilt_max', 'tilt_rate_limit')
 #: Recorded answers within this of the re-run (N, rad) reproduce it.
@@ -145,32 +155,31 @@ def read_control(path: str | Path, *, namespace: str | None = None,
     the tilt requests in force, from a bag; :class:`BagError` if it has no wrench_cmd."""
     from tiltrov_ros.bag.bagfile import bag_info
     from tiltrov_ros.bag.reader import (
-        THRUST_CMD,
-        TILT_CMD,
+        THRUSTS,
+        TILT_POSITIONS,
         WRENCH,
         find_namespace,
         read_series,
         rows_as_of,
         rows_at,
     )
-    from tiltrov_ros.bag.topics import join_namespace
 
     info = bag_info(path)
     if namespace is None:
         namespace = find_namespace({n: t.msgtype for n, t in info.topics.items()},
-                                   'wrench_cmd', WRENCH.msgtype)
+                                   WRENCH_CMD, WRENCH.msgtype)
     names = {rel: join_namespace(namespace, rel)
-             for rel in ('wrench_cmd', 'thrust_cmd', 'tilt_cmd', 'tilt_request')}
-    decoders = {names['wrench_cmd']: WRENCH, names['thrust_cmd']: THRUST_CMD,
-                names['tilt_cmd']: TILT_CMD, names['tilt_request']: TILT_CMD}
+             for rel in (WRENCH_CMD, THRUST_CMD, TILT_CMD, TILT_REQUEST)}
+    decoders = {names[WRENCH_CMD]: WRENCH, names[THRUST_CMD]: THRUSTS,
+                names[TILT_CMD]: TILT_POSITIONS, names[TILT_REQUEST]: TILT_POSITIONS}
     series = read_series(path, decoders, progress=progress)
-    wrench = series.get(names['wrench_cmd'])
+    wrench = series.get(names[WRENCH_CMD])
     if wrench is None or not len(wrench):
-        raise BagError(f'{path} has no {names["wrench_cmd"]} messages')
+        raise BagError(f'{path} has no {names[WRENCH_CMD]} messages')
     ticks = wrench.stamps
-    thrust, _ = rows_at(ticks, series.get(names['thrust_cmd']), 'thrust', 4)
-    tilt, _ = rows_at(ticks, series.get(names['tilt_cmd']), 'tilt', 2)
-    requests = series.get(names['tilt_request'])
+    thrust, _ = rows_at(ticks, series.get(names[THRUST_CMD]), 'thrust', 4)
+    tilt, _ = rows_at(ticks, series.get(names[TILT_CMD]), 'tilt', 2)
+    requests = series.get(names[TILT_REQUEST])
     request = rows_as_of(ticks, requests, 'tilt', 2)[0] if requests is not None else None
     return RecordedControl(ticks, wrench.columns['wrench'], thrust, tilt, request,
                            dict(info.run_info), namespace)
@@ -228,7 +237,7 @@ class Comparison:
 def compare(control: RecordedControl, settings: AllocatorSettings | None = None) -> Comparison:
     """Re-run the allocator in both modes on ``control.wrench_cmd``; compare to the recording."""
     settings = settings or AllocatorSettings.from_run_info(control.run_info)
-    allocators = {mode: settings.build(mode) for mode in MODES}
+    allocators = {mode: settings.build(mode) for mode in RERUNS}
     thrusts = {'recorded': control.thrust_cmd}
     tilts = {'recorded': control.tilt_cmd}
     for mode, allocator in allocators.items():
@@ -242,7 +251,7 @@ def compare(control: RecordedControl, settings: AllocatorSettings | None = None)
                                                        thrusts[name], tilts[name])
     recorded_mode = control.run_info.get('allocator_mode')
     reproduction: dict[str, Any] = {'mode': recorded_mode}
-    if recorded_mode in MODES:
+    if recorded_mode in RERUNS:
         known = np.all(np.isfinite(thrusts['recorded']), axis=1) & np.all(
             np.isfinite(tilts['recorded']), axis=1)
         d_thrust = np.abs(thrusts['recorded'][known] - thrusts[recorded_mode][known])
@@ -269,8 +278,7 @@ def compare(control: RecordedControl, settings: AllocatorSettings | None = None)
 def write_csv(comparison: Comparison, path: Path) -> Path:
     """One row per tick: t, wrench_cmd, then per allocation its weighted error, tilts, thrusts."""
     c = comparison
-    header = ['t [s]'] + [f'{n}_cmd [{u}]' for n, u in (
-        ('X', 'N'), ('Y', 'N'), ('Z', 'N'), ('K', 'N m'), ('M', 'N m'), ('N', 'N m'))]
+    header = ['t [s]'] + [f'{n}_cmd [{u}]' for n, u in zip(WRENCH_DOFS, WRENCH_UNITS)]
     columns = [c.control.t[:, None], c.control.wrench_cmd]
     for name in ALLOCATIONS:
         header += [f'{name}_weighted_error', f'{name}_tilt_front [rad]',

@@ -28,12 +28,13 @@ import sys
 from typing import Any
 
 from tiltrov_ros.analysis.runs import InputError, one_line, resolve, simulate
-from tiltrov_ros.core.controllers import DOF_NAMES, ControllerConfig
+from tiltrov_ros.core.controllers import ControllerConfig
 from tiltrov_ros.core.metrics import (
     FINAL_WINDOW,
     OSCILLATION_WINDOW,
     compute_metrics,
 )
+from tiltrov_ros.core.names import DOF_NAMES
 from tiltrov_ros.core.runlog import RunLog
 from tiltrov_ros.core.runner import StackConfig
 

@@ -28,18 +28,22 @@ from typing import Any
 import numpy as np
 import yaml
 
-from tiltrov_ros.core.controllers import CONTROLLER_KINDS, DOF_NAMES
+from tiltrov_ros.core.controllers import CONTROLLER_KINDS
 from tiltrov_ros.core.errors import TiltrovError
 from tiltrov_ros.core.metrics import compute_metrics, control_errors, write_metrics
+from tiltrov_ros.core.names import (
+    ALLOCATOR_MODES,
+    DOF_NAMES,
+    DOF_UNITS,
+    WRENCH_DOFS,
+    WRENCH_UNITS,
+)
 from tiltrov_ros.core.runlog import RunLog
 from tiltrov_ros.core.runner import StackConfig, run_scenario, stack_config
 from tiltrov_ros.progress import ProgressBar
 
 EXIT_BAD_INPUT = 2
 EXIT_IO = 1
-ALLOCATOR_MODES = ('robust', 'paper')
-_UNITS = ('m', 'm', 'm', 'rad', 'rad', 'rad')
-_WRENCH = (('X', 'N'), ('Y', 'N'), ('Z', 'N'), ('K', 'N m'), ('M', 'N m'), ('N', 'N m'))
 
 
 class InputError(Exception):
@@ -102,11 +106,11 @@ def write_control_csv(log: RunLog, path: str | Path) -> Path:
     """
     err = control_errors(log)
     header = ['t [s]']
-    header += [f'{n}_d [{u}]' for n, u in zip(DOF_NAMES, _UNITS)]
-    header += [f'{n} [{u}]' for n, u in zip(DOF_NAMES, _UNITS)]
-    header += [f'e_{n} [{u}]' for n, u in zip(DOF_NAMES, _UNITS)]
-    header += [f'{n}_cmd [{u}]' for n, u in _WRENCH]
-    header += [f'{n}_achieved [{u}]' for n, u in _WRENCH]
+    header += [f'{n}_d [{u}]' for n, u in zip(DOF_NAMES, DOF_UNITS)]
+    header += [f'{n} [{u}]' for n, u in zip(DOF_NAMES, DOF_UNITS)]
+    header += [f'e_{n} [{u}]' for n, u in zip(DOF_NAMES, DOF_UNITS)]
+    header += [f'{n}_cmd [{u}]' for n, u in zip(WRENCH_DOFS, WRENCH_UNITS)]
+    header += [f'{n}_achieved [{u}]' for n, u in zip(WRENCH_DOFS, WRENCH_UNITS)]
     header += [f'thrust_{i}_cmd [N]' for i in range(1, 5)]
     header += ['tilt_front_cmd [rad]', 'tilt_rear_cmd [rad]', 'tilt_front [rad]',
                'tilt_rear [rad]']

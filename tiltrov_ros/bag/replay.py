@@ -29,9 +29,11 @@ from pathlib import Path
 import time
 from typing import Any
 
-from ..core.errors import BagError
+from tiltrov_ros.core.errors import BagError
+from tiltrov_ros.core.names import CLOCK, join_namespace
+from tiltrov_ros.core.timebase import ns_to_stamp, seconds, to_ns
+
 from .bagfile import BagInfo, RawMessage, bag_info, iter_raw
-from .topics import CLOCK_TOPIC, join_namespace
 
 #: ``--through``: the parts of the stack a bag can be replayed through offline.
 THROUGH = ('allocator',)
@@ -96,10 +98,10 @@ class Player:
         if unknown:
             raise BagError(f'not in {bag}: {", ".join(sorted(unknown))}')
         self.topics = [name for name in self.info.topics
-                       if (name in wanted if wanted else name != CLOCK_TOPIC)]
-        self.generate_clock = self.options.clock and CLOCK_TOPIC not in self.info.topics
-        if self.options.clock and not self.generate_clock and CLOCK_TOPIC not in self.topics:
-            self.topics.append(CLOCK_TOPIC)
+                       if (name in wanted if wanted else name != CLOCK)]
+        self.generate_clock = self.options.clock and CLOCK not in self.info.topics
+        if self.options.clock and not self.generate_clock and CLOCK not in self.topics:
+            self.topics.append(CLOCK)
         self.publishers: dict[str, Any] = {}
         for name in self.topics:
             topic = self.info.topics[name]
@@ -111,7 +113,7 @@ class Player:
             from rosgraph_msgs.msg import Clock
 
             self._clock_pub = node.create_publisher(
-                Clock, CLOCK_TOPIC, replay_qos((), self.options.queue_depth))
+                Clock, CLOCK, replay_qos((), self.options.queue_depth))
         self.counts: dict[str, int] = {}
 
     def _ok(self, should_stop: Callable[[], bool]) -> bool:
@@ -149,11 +151,11 @@ class Player:
             for m in messages:
                 yield m.log_time, m.topic, m.data
             return
-        from .cdr import stamp_ns
+        from .cdr import leading_stamp_ns
 
         timed = []
         for m in messages:
-            stamp = stamp_ns(m.data, m.msgtype)
+            stamp = leading_stamp_ns(m.data, m.msgtype)
             timed.append((m.log_time if stamp is None else stamp, m.topic, m.data))
         timed.sort(key=lambda item: item[0])
         yield from timed
@@ -163,13 +165,13 @@ class Player:
         if not self.generate_clock:
             yield from self._timed()
             return
-        period = round(1e9 / self.options.clock_hz)
+        period = to_ns(1.0 / self.options.clock_hz)
         tick: int | None = None if self.options.by_stamp else self.info.start_ns
         for time_ns, topic, data in self._timed():
             if tick is None:
                 tick = time_ns
             while tick <= time_ns:
-                yield tick, CLOCK_TOPIC, tick
+                yield tick, CLOCK, tick
                 tick += period
             yield time_ns, topic, data
 
@@ -189,7 +191,7 @@ class Player:
             for log_time, topic, payload in self._schedule():
                 if first is None:
                     first = log_time
-                if not self._sleep_until(start_wall + (log_time - first) / 1e9 / rate,
+                if not self._sleep_until(start_wall + seconds(log_time - first) / rate,
                                          should_stop):
                     return
                 self._publish(topic, payload)
@@ -214,7 +216,7 @@ class Player:
             from rosgraph_msgs.msg import Clock
 
             msg = Clock()
-            msg.clock.sec, msg.clock.nanosec = divmod(payload, 1_000_000_000)
+            msg.clock.sec, msg.clock.nanosec = ns_to_stamp(payload)
             assert self._clock_pub is not None
             self._clock_pub.publish(msg)
         else:

@@ -30,13 +30,12 @@ import time
 from typing import Any
 
 from tiltrov_ros.core.controllers import CONTROLLER_KINDS
+from tiltrov_ros.core.names import CLOCK, DIAGNOSTICS, PLANT, STACK_TOPICS
 from tiltrov_ros.stack import supervisor as launcher
 
 #: s (wall) the other nodes keep running after the plant's end: one more
 #: /diagnostics round (every 1 s) carries their final counts to the recorder.
 LINGER = 2.0
-STACK_TOPICS = ('odom', 'joint_states', '/clock', 'setpoint', 'setpoint_velocity',
-                'wrench_cmd', 'tilt_request', 'thrust_cmd', 'tilt_cmd', 'wrench_achieved')
 
 
 def rss_kib(pid: int) -> int | None:
@@ -108,7 +107,7 @@ def final_diagnostics(bag: Path) -> tuple[dict[str, dict[str, str]], list[float]
             name = status.name.rsplit('/', 1)[-1]
             values = {kv.key: kv.value for kv in status.values}
             last[name] = values
-            if name == launcher.PLANT and 'real_time_factor_achieved' in values:
+            if name == PLANT and 'real_time_factor_achieved' in values:
                 rtf.append(float(values['real_time_factor_achieved']))
     return last, rtf
 
@@ -119,10 +118,12 @@ def message_counts(bag: Path, diagnostics: Mapping[str, Mapping[str, str]]
     from tiltrov_ros.bag.bagfile import bag_info
 
     info = bag_info(bag)
-    recorded = {name.lstrip('/') if name != '/clock' else name: t.count
+    recorded = {name.lstrip('/') if name != CLOCK else name: t.count
                 for name, t in info.topics.items()}
     out: dict[str, dict[str, int]] = {}
     for topic in STACK_TOPICS:
+        if topic == DIAGNOSTICS:
+            continue
         published = sum(int(values.get(f'published.{topic}', 0))
                         for values in diagnostics.values())
         if published or recorded.get(topic):
@@ -169,7 +170,7 @@ def run(args: argparse.Namespace) -> int:
         return launcher.EXIT_FAILED
     diagnostics, rtf = final_diagnostics(bag)
     counts = message_counts(bag, diagnostics)
-    plant = diagnostics.get(launcher.PLANT, {})
+    plant = diagnostics.get(PLANT, {})
     tenth = max(1, len(rtf) // 10)
     result: dict[str, Any] = {
         'duration': args.duration, 'scenario': args.scenario, 'wall_seconds': wall,

@@ -45,7 +45,6 @@ FloatArray = NDArray[np.float64]
 
 ControllerKind = Literal['pd', 'switching', 'pid']
 CONTROLLER_KINDS: tuple[str, ...] = ('pd', 'switching', 'pid')
-DOF_NAMES = ('x', 'y', 'z', 'roll', 'pitch', 'yaw')
 CONTROLLER_YAML = 'wrench_controller.yaml'
 
 # |cos(pitch)| under which J(eta) is evaluated at a pitch just short of +-90 deg.

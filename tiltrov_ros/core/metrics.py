@@ -72,8 +72,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tiltrov_ros.core.allocation import infeasible_rows
-from tiltrov_ros.core.controllers import DOF_NAMES
 from tiltrov_ros.core.kinematics import euler_from_quat_rows, ssa
+from tiltrov_ros.core.names import DOF_NAMES, SERVOS, THRUSTERS
 from tiltrov_ros.core.runlog import RunLog
 
 FloatArray = NDArray[np.float64]
@@ -96,8 +96,6 @@ STAMP_TOLERANCE = 1e-6
 #: s, slack on window edges (stamps are ns; float seconds round).
 _EDGE = 1e-9
 
-SERVOS = ('front', 'rear')
-THRUSTERS = ('thruster_1', 'thruster_2', 'thruster_3', 'thruster_4')
 
 
 @dataclass(frozen=True)

@@ -60,10 +60,11 @@ import numpy as np
 from numpy.typing import NDArray
 import yaml
 
-from tiltrov_ros.core.controllers import DOF_NAMES, Reference
+from tiltrov_ros.core.controllers import Reference
 from tiltrov_ros.core.disturbances import Disturbances
 from tiltrov_ros.core.errors import ParameterError, ScenarioError
 from tiltrov_ros.core.kinematics import quat_from_euler
+from tiltrov_ros.core.names import DOF_NAMES
 from tiltrov_ros.core.params import RobotParams
 
 FloatArray = NDArray[np.float64]

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import math
 
 from tiltrov_ros.core.errors import ParameterError, TiltrovError
-from tiltrov_ros.core.timebase import NS_PER_S
+from tiltrov_ros.core.timebase import NS_PER_S, format_ns, stamp_to_ns, to_ns
 
 NON_FINITE = 'non_finite'          # NaN or infinity in a value the node uses
 WRONG_LENGTH = 'wrong_length'      # a JointState array neither empty nor one per name
@@ -73,34 +73,31 @@ class StampBounds:
 
     @classmethod
     def from_seconds(cls, max_future: float, max_age: float) -> StampBounds:
-        return cls(round(max_future * NS_PER_S), round(max_age * NS_PER_S))
+        return cls(to_ns(max_future), to_ns(max_age))
 
 
-def _text(ns: int) -> str:
-    return f'{ns / NS_PER_S:.3f} s'
-
-
-def stamp_ns(sec: int, nanosec: int) -> int:
+def checked_stamp_ns(sec: int, nanosec: int) -> int:
     """Integer ns of a ``builtin_interfaces/Time``; :data:`BAD_STAMP` if malformed."""
     if sec < 0 or not 0 <= nanosec < NS_PER_S:
         raise InvalidInput(BAD_STAMP, f'stamp sec={sec} nanosec={nanosec} is not a time '
                                       '(sec >= 0, 0 <= nanosec < 1e9)')
-    return int(sec) * NS_PER_S + int(nanosec)
+    return stamp_to_ns(sec, nanosec)
 
 
 def check_stamp(sec: int, nanosec: int, now_ns: int | None, bounds: StampBounds) -> int:
     """The stamp in ns, checked against the node's clock ``now_ns`` (None: unknown)."""
-    ns = stamp_ns(sec, nanosec)
+    ns = checked_stamp_ns(sec, nanosec)
     if now_ns is None:
         return ns
     if bounds.max_future_ns and ns - now_ns > bounds.max_future_ns:
-        raise InvalidInput(FUTURE_STAMP, f'stamp {_text(ns)} is {_text(ns - now_ns)} ahead of '
-                                         f'the node\'s clock ({_text(now_ns)}; allowed: '
-                                         f'{_text(bounds.max_future_ns)}, stamp_max_future)')
+        raise InvalidInput(FUTURE_STAMP, f'stamp {format_ns(ns)} is {format_ns(ns - now_ns)} '
+                                         f'ahead of the node\'s clock ({format_ns(now_ns)}; '
+                                         f'allowed: {format_ns(bounds.max_future_ns)}, '
+                                         'stamp_max_future)')
     if bounds.max_age_ns and now_ns - ns > bounds.max_age_ns:
-        raise InvalidInput(OLD_STAMP, f'stamp {_text(ns)} is {_text(now_ns - ns)} behind the '
-                                      f'node\'s clock ({_text(now_ns)}; allowed: '
-                                      f'{_text(bounds.max_age_ns)}, stamp_max_age)')
+        raise InvalidInput(OLD_STAMP, f'stamp {format_ns(ns)} is {format_ns(now_ns - ns)} '
+                                      f'behind the node\'s clock ({format_ns(now_ns)}; '
+                                      f'allowed: {format_ns(bounds.max_age_ns)}, stamp_max_age)')
     return ns
 
 

@@ -10,7 +10,7 @@ Design points:
 * Throughput: each callback, after the message the executor took, takes the
   messages already queued on the same subscription (up to ``_DRAIN_LIMIT``),
   which keeps the executor's per-message overhead off the hot path.
-* The stack's topics (:data:`~tiltrov_ros.bag.topics.STACK_TOPICS`) are
+* The stack's topics (:data:`~tiltrov_ros.core.names.STACK_TOPICS`) are
   subscribed at start-up, before their publishers exist, so the first message
   of a run is recorded; other topics are found by polling the graph every
   ``discovery_period`` seconds.
@@ -34,7 +34,6 @@ from datetime import datetime
 import functools
 import json
 import signal
-import struct
 import sys
 import time
 from typing import Any
@@ -60,24 +59,16 @@ from .. import __version__
 from ..bag.bagfile import RUN_INFO_KEY, parse_run_info
 from ..bag.msgdefs import message_class, message_definition
 from ..bag.qos import matches, subscription_qos, to_bag_qos
-from ..bag.topics import CLOCK_TOPIC, STACK_TOPICS, is_hidden, normalize_type
+from ..bag.topics import is_hidden, normalize_type
 from ..bag.writer import COMPRESSIONS, BagWriter
 from ..core.errors import BagError, ParameterError, TiltrovError
+from ..core.names import CLOCK, RECORDER, STACK_TOPICS
+from ..core.timebase import cdr_stamp_ns
 from .base import descriptor
 
-NODE_NAME = 'bag_recorder'
 VERSION_KEY = 'tiltrov.version'
 _DRAIN_LIMIT = 1000       # messages taken per callback, for fairness between topics
 _THROTTLE = 5.0           # s, for repeated warnings from callbacks
-
-
-def clock_ns(data: bytes) -> int:
-    """Sim time (ns) carried by a serialized ``rosgraph_msgs/Clock``."""
-    if len(data) < 12:
-        raise BagError(f'/clock message of {len(data)} bytes')
-    fmt = '<iI' if data[1] == 1 else '>iI'  # CDR encapsulation 0x0001 = little endian
-    sec, nanosec = struct.unpack_from(fmt, data, 4)
-    return int(sec) * 1_000_000_000 + int(nanosec)
 
 
 @dataclass(frozen=True)
@@ -194,7 +185,7 @@ class BagRecorder(Node):
     """
 
     def __init__(self, *, params: Mapping[str, Any] | None = None,
-                 node_name: str = NODE_NAME, namespace: str | None = None,
+                 node_name: str = RECORDER, namespace: str | None = None,
                  context: Context | None = None,
                  cli_args: Sequence[str] | None = None) -> None:
         overrides = [Parameter(name, value=value) for name, value in (params or {}).items()]
@@ -230,7 +221,7 @@ class BagRecorder(Node):
                 message_definition(msgtype)
                 self._subscribe(name, msgtype, [])
         if self._use_sim_time and self._clock_topic is None:
-            self._subscribe(CLOCK_TOPIC, STACK_TOPICS[CLOCK_TOPIC], [], record=False)
+            self._subscribe(CLOCK, STACK_TOPICS[CLOCK], [], record=False)
 
         wall = Clock(clock_type=ClockType.STEADY_TIME)
         self._discover()
@@ -262,7 +253,7 @@ class BagRecorder(Node):
                 self.get_logger().warning(f'not recording {name}: {exc}')
             return
         qos = subscription_qos([p.qos_profile for p in publishers], self.config.queue_depth)
-        if name == CLOCK_TOPIC and not record:
+        if name == CLOCK and not record:
             qos.reliability = ReliabilityPolicy.BEST_EFFORT  # time only: match any /clock
         topic = self._topics.get(name)
         if topic is None:
@@ -279,7 +270,7 @@ class BagRecorder(Node):
         topic.sub = self.create_subscription(
             msg_class, name, functools.partial(self._on_message, topic), qos,
             raw=True, event_callbacks=events)
-        if name == CLOCK_TOPIC and self._use_sim_time:
+        if name == CLOCK and self._use_sim_time:
             self._clock_topic = topic
 
     def _discover(self) -> None:
@@ -344,7 +335,7 @@ class BagRecorder(Node):
             return
         topic.received += 1
         if topic is self._clock_topic:
-            self._clock_ns = clock_ns(data)
+            self._clock_ns = cdr_stamp_ns(data)
             log_time = self._clock_ns
         elif self._clock_topic is not None:
             self._drain(self._clock_topic, limit=_DRAIN_LIMIT)  # /clock before later data
@@ -467,7 +458,7 @@ class BagRecorder(Node):
 
 def recorder_command(output: str, *, run_info: Mapping[str, Any] | None = None,
                      params: Mapping[str, Any] | None = None,
-                     executable: str = NODE_NAME) -> list[str]:
+                     executable: str = RECORDER) -> list[str]:
     """argv that starts the recorder as a process (e.g. for the launcher).
 
     ``params`` values are passed as ``-p name:=value`` with YAML quoting, so

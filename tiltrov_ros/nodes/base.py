@@ -15,7 +15,6 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 import functools
 import math
 import os
-import struct
 import sys
 import time
 from typing import Any, TypeVar
@@ -62,35 +61,24 @@ import yaml
 
 from tiltrov_ros.core import validation
 from tiltrov_ros.core.errors import ParameterError, TiltrovError
+from tiltrov_ros.core.names import (
+    DIAGNOSTICS,
+    FRAME_BODY,
+    FRAME_EARTH,
+    LOCKSTEP,
+)
 from tiltrov_ros.core.params import RobotParams, load_control_period, load_robot_params
-from tiltrov_ros.core.timebase import NS_PER_S, ns_to_stamp, to_ns
+from tiltrov_ros.core.timebase import (
+    NS_PER_S,
+    format_ns,
+    ns_to_stamp,
+    seconds,
+    stamp_to_ns,
+    to_ns,
+)
 from tiltrov_ros.core.validation import InvalidInput, StampBounds
 
 FloatArray = NDArray[np.float64]
-
-# --------------------------------------------------------------------------- names
-
-FRAME_EARTH = 'odom_ned'
-FRAME_BODY = 'base_link_frd'
-THRUSTERS = ('thruster_1', 'thruster_2', 'thruster_3', 'thruster_4')
-TILTS = ('tilt_front', 'tilt_rear')
-
-# Relative topic names (a namespace pushed on the stack applies to them).
-ODOM = 'odom'
-JOINT_STATES = 'joint_states'
-SETPOINT = 'setpoint'
-SETPOINT_VELOCITY = 'setpoint_velocity'
-WRENCH_CMD = 'wrench_cmd'
-TILT_REQUEST = 'tilt_request'
-THRUST_CMD = 'thrust_cmd'
-TILT_CMD = 'tilt_cmd'
-WRENCH_ACHIEVED = 'wrench_achieved'
-CLOCK = '/clock'
-DIAGNOSTICS = '/diagnostics'
-
-LOCKSTEP = 'lockstep'
-REALTIME = 'realtime'
-MODES = (LOCKSTEP, REALTIME)
 
 #: s: repeated warnings from callbacks are throttled to one per this period.
 THROTTLE = 5.0
@@ -146,20 +134,7 @@ def reader_qos(mode: str) -> QoSProfile:
 
 def stamp_ns(stamp: Time) -> int:
     """Integer ns of a ``builtin_interfaces/Time``."""
-    return int(stamp.sec) * NS_PER_S + int(stamp.nanosec)
-
-
-def cdr_stamp_ns(data: bytes) -> int:
-    """Header stamp (ns) of a serialized message that starts with a ``std_msgs/Header``.
-
-    CDR: a 4-byte encapsulation (byte 1: 1 = little endian), then the stamp's
-    int32 sec and uint32 nanosec. Lets a raw subscription skip deserializing
-    the messages it does not need (the controller's odometry between ticks).
-    """
-    if len(data) < 12:
-        raise ValueError(f'a serialized message of {len(data)} bytes has no header')
-    sec, nanosec = struct.unpack_from('<iI' if data[1] == 1 else '>iI', data, 4)
-    return int(sec) * NS_PER_S + int(nanosec)
+    return stamp_to_ns(stamp.sec, stamp.nanosec)
 
 
 def set_stamp(stamp: Time, ns: int) -> None:
@@ -170,11 +145,6 @@ def set_stamp(stamp: Time, ns: int) -> None:
 def steady_clock() -> Clock:
     """A monotonic wall clock for timeouts and diagnostics (independent of sim time)."""
     return Clock(clock_type=ClockType.STEADY_TIME)
-
-
-def format_ns(ns: int) -> str:
-    """``12.345 s``-style text of a sim time, for logs."""
-    return f'{ns / NS_PER_S:.3f} s'
 
 
 # --------------------------------------------------------------------------- conversions
@@ -622,7 +592,7 @@ class InputWatchdog:
             self.events += 1
             self.node.get_logger().warning(
                 f'{self.topic} is stale: the newest (stamped {format_ns(seen[0])}) is '
-                f'{age / 1e9:.3f} s old ({self.timeout_name} {timeout:g} s); '
+                f'{seconds(age):.3f} s old ({self.timeout_name} {timeout:g} s); '
                 f'{self.safe_action}')
         return seen
 

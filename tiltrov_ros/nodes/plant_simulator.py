@@ -50,6 +50,19 @@ from sensor_msgs.msg import JointState
 from tiltrov_ros.core.disturbances import Disturbances
 from tiltrov_ros.core.errors import ParameterError
 from tiltrov_ros.core.kinematics import quat_from_euler
+from tiltrov_ros.core.names import (
+    CLOCK,
+    JOINT_STATES,
+    LOCKSTEP,
+    MODES,
+    ODOM,
+    PLANT,
+    REALTIME,
+    THRUST_CMD,
+    THRUSTERS,
+    TILT_CMD,
+    TILTS,
+)
 from tiltrov_ros.core.params import RobotParams
 from tiltrov_ros.core.plant import Plant
 from tiltrov_ros.core.scenarios import (
@@ -59,25 +72,18 @@ from tiltrov_ros.core.scenarios import (
     failed_at,
     load_scenario,
 )
-from tiltrov_ros.core.timebase import seconds, to_ns
-from tiltrov_ros.core.validation import InvalidInput, failed_thruster_indices
-from tiltrov_ros.core.validation import stamp_ns as checked_stamp_ns
+from tiltrov_ros.core.timebase import format_ns, seconds, to_ns
+from tiltrov_ros.core.validation import (
+    InvalidInput,
+    checked_stamp_ns,
+    failed_thruster_indices,
+)
 
 from .base import (
-    CLOCK,
-    JOINT_STATES,
-    LOCKSTEP,
-    MODES,
-    ODOM,
     OK,
     PUBLISHER_QOS,
-    REALTIME,
     RELIABLE_QOS,
     THROTTLE,
-    THRUST_CMD,
-    THRUSTERS,
-    TILT_CMD,
-    TILTS,
     WARN,
     Overrides,
     TiltrovNode,
@@ -86,7 +92,6 @@ from .base import (
     descriptor,
     fill_joint_state,
     fill_odometry,
-    format_ns,
     guarded,
     input_callback,
     joint_state_values,
@@ -96,7 +101,6 @@ from .base import (
     set_stamp,
 )
 
-NODE_NAME = 'plant_simulator'
 #: joint_states value of a field a joint does not have (thruster position and
 #: velocity, servo effort): 0.0, since no topic carries NaN (README.md, "Reliability").
 NO_VALUE = 0.0
@@ -222,7 +226,7 @@ def declare_parameters(node: TiltrovNode) -> PlantConfig:
 class PlantSimulator(TiltrovNode):
     """The simulated robot (see the module docstring)."""
 
-    def __init__(self, *, node_name: str = NODE_NAME, namespace: str | None = None,
+    def __init__(self, *, node_name: str = PLANT, namespace: str | None = None,
                  context: Any = None, cli_args: Sequence[str] | None = None,
                  parameter_overrides: Overrides = None) -> None:
         super().__init__(node_name, namespace=namespace, context=context, cli_args=cli_args,
@@ -300,7 +304,7 @@ class PlantSimulator(TiltrovNode):
         if not self.finished.done():
             self._waiting_since = None
             t = self.plant.time_ns
-            wall = (self.steady_ns() - self._started_at) / 1e9
+            wall = seconds(self.steady_ns() - self._started_at)
             self.get_logger().info(
                 f'reached the end of the run at {format_ns(t)}: {wall:.3f} s wall since '
                 f'the initial state, real-time factor {seconds(t) / max(wall, 1e-9):.2f}')
@@ -432,7 +436,7 @@ class PlantSimulator(TiltrovNode):
             now = self.steady_ns()
             if self._peers_since is None:
                 self._peers_since = now
-            if (now - self._peers_since) / 1e9 < self.config.startup_delay:
+            if seconds(now - self._peers_since) < self.config.startup_delay:
                 return
             if not self.lockstep:
                 self.destroy_timer(self._watchdog_timer)
@@ -446,7 +450,7 @@ class PlantSimulator(TiltrovNode):
         since = self._waiting_since
         if since is None or self.finished.done():
             return
-        waited = (self.steady_ns() - since) / 1e9
+        waited = seconds(self.steady_ns() - since)
         t = self.plant.time_ns
         if not self._commands_seen:
             # Start-up: a reader matched late may have missed the initial state.
@@ -579,7 +583,7 @@ class PlantSimulator(TiltrovNode):
         """Wait (at most ``timeout`` s in all) until every reliable reader acknowledged
         the last messages (end of run). Fast DDS acknowledges on its heartbeat period,
         so this is a bounded courtesy: the samples are already on the wire."""
-        deadline = self.steady_ns() + int(timeout * 1e9)
+        deadline = self.steady_ns() + to_ns(timeout)
         acked = True
         for pub in (self._joint_pub, self._odom_pub, self._clock_pub):
             left = max(deadline - self.steady_ns(), 0)
@@ -597,7 +601,7 @@ def main(args: list[str] | None = None) -> int:
         node.publish_diagnostics()      # the final counts, for recorders and tiltrov soak
         node.wait_for_delivery()
 
-    return main_loop(PlantSimulator, args, NODE_NAME, until=until, before_exit=before_exit)
+    return main_loop(PlantSimulator, args, PLANT, until=until, before_exit=before_exit)
 
 
 if __name__ == '__main__':

@@ -29,18 +29,21 @@ from typing import Any
 from geometry_msgs.msg import PoseStamped, TwistStamped
 from rosgraph_msgs.msg import Clock as ClockMsg
 
-from tiltrov_ros.core.scenarios import ReferenceProfile, load_scenario
-from tiltrov_ros.core.timebase import seconds, to_ns
-from tiltrov_ros.core.validation import stamp_ns as checked_stamp_ns
-
-from .base import (
+from tiltrov_ros.core.names import (
     CLOCK,
-    CLOCK_READER_QOS,
     FRAME_EARTH,
-    OK,
-    PUBLISHER_QOS,
+    REFERENCE,
     SETPOINT,
     SETPOINT_VELOCITY,
+)
+from tiltrov_ros.core.scenarios import ReferenceProfile, load_scenario
+from tiltrov_ros.core.timebase import format_ns, seconds, to_ns
+from tiltrov_ros.core.validation import checked_stamp_ns
+
+from .base import (
+    CLOCK_READER_QOS,
+    OK,
+    PUBLISHER_QOS,
     THROTTLE,
     WARN,
     Overrides,
@@ -49,14 +52,11 @@ from .base import (
     descriptor,
     fill_pose,
     fill_twist,
-    format_ns,
     guarded,
     input_callback,
     main_loop,
     stamp_ns,
 )
-
-NODE_NAME = 'reference_publisher'
 
 #: eta_d = 0 for ever: the reference without a scenario.
 HOLD_ORIGIN = ReferenceProfile(((),) * 6)
@@ -65,7 +65,7 @@ HOLD_ORIGIN = ReferenceProfile(((),) * 6)
 class ReferencePublisher(TiltrovNode):
     """Publishes the reference at every control tick (see the module docstring)."""
 
-    def __init__(self, *, node_name: str = NODE_NAME, namespace: str | None = None,
+    def __init__(self, *, node_name: str = REFERENCE, namespace: str | None = None,
                  context: Any = None, cli_args: Sequence[str] | None = None,
                  parameter_overrides: Overrides = None) -> None:
         super().__init__(node_name, namespace=namespace, context=context, cli_args=cli_args,
@@ -185,7 +185,7 @@ class ReferencePublisher(TiltrovNode):
 
 def main(args: list[str] | None = None) -> int:
     """``reference_publisher [--ros-args --params-file config/reference_publisher.yaml ...]``."""
-    return main_loop(ReferencePublisher, args, NODE_NAME)
+    return main_loop(ReferencePublisher, args, REFERENCE)
 
 
 if __name__ == '__main__':

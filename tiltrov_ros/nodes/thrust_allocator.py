@@ -44,8 +44,20 @@ from tiltrov_ros.core.allocation import (
     load_allocator_config,
 )
 from tiltrov_ros.core.errors import ParameterError
+from tiltrov_ros.core.names import (
+    ALLOCATOR,
+    FRAME_BODY,
+    THRUST_CMD,
+    THRUSTERS,
+    TILT_CMD,
+    TILT_REQUEST,
+    TILTS,
+    WRENCH_ACHIEVED,
+    WRENCH_CMD,
+    WRENCH_DOFS,
+)
 from tiltrov_ros.core.scenarios import ThrusterFault, failed_at, load_scenario
-from tiltrov_ros.core.timebase import seconds, to_ns
+from tiltrov_ros.core.timebase import format_ns, seconds, to_ns
 from tiltrov_ros.core.validation import (
     MAX_WRENCH,
     InvalidInput,
@@ -56,19 +68,11 @@ from tiltrov_ros.core.validation import (
 )
 
 from .base import (
-    FRAME_BODY,
     OK,
     PUBLISHER_QOS,
     RELIABLE_QOS,
     THROTTLE,
-    THRUST_CMD,
-    THRUSTERS,
-    TILT_CMD,
-    TILT_REQUEST,
-    TILTS,
     WARN,
-    WRENCH_ACHIEVED,
-    WRENCH_CMD,
     FloatArray,
     InputWatchdog,
     Overrides,
@@ -78,7 +82,6 @@ from .base import (
     descriptor,
     fill_joint_state,
     fill_wrench,
-    format_ns,
     guarded,
     input_callback,
     joint_state_values,
@@ -89,14 +92,11 @@ from .base import (
     wrench_array,
 )
 
-NODE_NAME = 'thrust_allocator'
 TILT_REQUEST_MODES = ('auto', 'required', 'ignored')
 #: s (wall): how often a wrench waiting for its tilt request is looked at.
 WATCHDOG_PERIOD = 0.1
 BUFFER = 200
 ALLOCATOR_KEYS = ('mode', 'max_tilt_step', 'weights')
-#: Wrench components, in the order of wrench_cmd (force X Y Z, moment K M N).
-WRENCH_DOFS = ('X', 'Y', 'Z', 'K', 'M', 'N')
 
 
 def thruster_names(indices: Sequence[int]) -> str:
@@ -113,7 +113,7 @@ class _Waiting:
 class ThrustAllocatorNode(TiltrovNode):
     """The thrust allocator (see the module docstring)."""
 
-    def __init__(self, *, node_name: str = NODE_NAME, namespace: str | None = None,
+    def __init__(self, *, node_name: str = ALLOCATOR, namespace: str | None = None,
                  context: Any = None, cli_args: Sequence[str] | None = None,
                  parameter_overrides: Overrides = None) -> None:
         super().__init__(node_name, namespace=namespace, context=context, cli_args=cli_args,
@@ -327,7 +327,7 @@ class ThrustAllocatorNode(TiltrovNode):
         waiting = self._waiting
         if waiting is None:
             return
-        waited = (self.steady_ns() - waiting.since) / 1e9
+        waited = seconds(self.steady_ns() - waiting.since)
         if waited < self.input_timeout:
             return
         self.stale_requests += 1
@@ -506,7 +506,7 @@ class ThrustAllocatorNode(TiltrovNode):
 
 def main(args: list[str] | None = None) -> int:
     """``thrust_allocator [--ros-args --params-file config/thrust_allocator.yaml ...]``."""
-    return main_loop(ThrustAllocatorNode, args, NODE_NAME)
+    return main_loop(ThrustAllocatorNode, args, ALLOCATOR)
 
 
 if __name__ == '__main__':

@@ -48,7 +48,21 @@ from tiltrov_ros.core.controllers import (
     retune,
 )
 from tiltrov_ros.core.errors import ParameterError
-from tiltrov_ros.core.timebase import seconds, to_ns
+from tiltrov_ros.core.names import (
+    CONTROLLER,
+    FRAME_BODY,
+    FRAME_EARTH,
+    LOCKSTEP,
+    MODES,
+    ODOM,
+    REALTIME,
+    SETPOINT,
+    SETPOINT_VELOCITY,
+    TILT_REQUEST,
+    TILTS,
+    WRENCH_CMD,
+)
+from tiltrov_ros.core.timebase import cdr_stamp_ns, format_ns, seconds, to_ns
 from tiltrov_ros.core.validation import (
     InvalidInput,
     check_finite,
@@ -57,32 +71,19 @@ from tiltrov_ros.core.validation import (
 )
 
 from .base import (
-    FRAME_BODY,
-    FRAME_EARTH,
-    LOCKSTEP,
-    MODES,
-    ODOM,
     OK,
     PUBLISHER_QOS,
-    REALTIME,
     RELIABLE_QOS,
-    SETPOINT,
-    SETPOINT_VELOCITY,
     THROTTLE,
-    TILT_REQUEST,
-    TILTS,
     WARN,
-    WRENCH_CMD,
     FloatArray,
     InputWatchdog,
     Overrides,
     TiltrovNode,
-    cdr_stamp_ns,
     declare_robot,
     descriptor,
     fill_joint_state,
     fill_wrench,
-    format_ns,
     guarded,
     input_callback,
     main_loop,
@@ -95,7 +96,6 @@ from .base import (
     twist_array,
 )
 
-NODE_NAME = 'wrench_controller'
 #: s (wall): how often the lockstep watchdog looks at a waiting tick.
 WATCHDOG_PERIOD = 0.1
 #: Buffered setpoints (by stamp); older ones are dropped.
@@ -143,7 +143,7 @@ def _config_mapping(get: Any) -> dict[str, Any]:
 class WrenchController(TiltrovNode):
     """The wrench controller (see the module docstring)."""
 
-    def __init__(self, *, node_name: str = NODE_NAME, namespace: str | None = None,
+    def __init__(self, *, node_name: str = CONTROLLER, namespace: str | None = None,
                  context: Any = None, cli_args: Sequence[str] | None = None,
                  parameter_overrides: Overrides = None) -> None:
         super().__init__(node_name, namespace=namespace, context=context, cli_args=cli_args,
@@ -423,7 +423,7 @@ class WrenchController(TiltrovNode):
         tick = self._tick
         if tick is None:
             return
-        waited = (self.steady_ns() - tick.since) / 1e9
+        waited = seconds(self.steady_ns() - tick.since)
         if waited < self.input_timeout:
             return
         if tick.ns in self._setpoints:
@@ -454,7 +454,7 @@ class WrenchController(TiltrovNode):
             message = (f'odom stale (older than odom_timeout {self.odom_timeout:g} s): '
                        'publishing a zero wrench')
         elif (tick is not None and self.lockstep
-                and (self.steady_ns() - tick.since) / 1e9 >= self.input_timeout):
+                and seconds(self.steady_ns() - tick.since) >= self.input_timeout):
             level = WARN
             message = f'waiting for the setpoint stamped {format_ns(tick.ns)}'
         elif self.velocity_timeouts or self.no_setpoint:
@@ -481,7 +481,7 @@ def _trim(buffer: dict[int, Any]) -> None:
 
 def main(args: list[str] | None = None) -> int:
     """``wrench_controller [--ros-args --params-file config/wrench_controller.yaml ...]``."""
-    return main_loop(WrenchController, args, NODE_NAME)
+    return main_loop(WrenchController, args, CONTROLLER)
 
 
 if __name__ == '__main__':

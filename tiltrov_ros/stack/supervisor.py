@@ -46,17 +46,23 @@ import yaml
 
 from tiltrov_ros.core.controllers import CONTROLLER_KINDS
 from tiltrov_ros.core.errors import TiltrovError
+from tiltrov_ros.core.names import (
+    ALLOCATOR,
+    ALLOCATOR_MODES,
+    CONTROLLER,
+    LOCKSTEP,
+    PLANT,
+    REALTIME,
+    RECORDER,
+    REFERENCE,
+    normalize_namespace,
+)
 from tiltrov_ros.core.runner import StackConfig, stack_config
 from tiltrov_ros.core.scenarios import scenario_names
 from tiltrov_ros.core.timebase import seconds, to_ns
 from tiltrov_ros.paths import config_file
 
-PLANT = 'plant_simulator'
-CONTROLLER = 'wrench_controller'
-ALLOCATOR = 'thrust_allocator'
-REFERENCE = 'reference_publisher'
-RECORDER = 'bag_recorder'
-#: Where the recorder node lives (branch ``bags``); ``--record`` needs it.
+#: Where the recorder node lives; ``--record`` starts it.
 RECORDER_MODULE = 'tiltrov_ros.nodes.bag_recorder'
 
 #: s (wall) a node gets to exit after SIGINT, then after SIGTERM, before SIGKILL.
@@ -143,11 +149,6 @@ class NodeSpec:
         return args
 
 
-def normalize_namespace(namespace: str) -> str:
-    namespace = namespace.strip().strip('/')
-    return f'/{namespace}' if namespace else ''
-
-
 def resolve(options: LaunchOptions) -> tuple[StackConfig, float]:
     """The stack configuration and the duration (s), validated before anything starts."""
     scenario = options.scenario
@@ -189,7 +190,7 @@ def stack_specs(options: LaunchOptions, *, config_dir: Path | None = None,
         if not sep or ':=' not in assignment:
             raise LaunchError(f'--param {item!r}: expected NODE:NAME:=VALUE')
         raw.setdefault(node, []).append(assignment)
-    mode = 'lockstep' if options.lockstep else 'realtime'
+    mode = LOCKSTEP if options.lockstep else REALTIME
     sim = {'use_sim_time': True}
     kind = config.controller.kind
 
@@ -237,7 +238,7 @@ def stack_specs(options: LaunchOptions, *, config_dir: Path | None = None,
 def run_info(options: LaunchOptions, config: StackConfig, duration: float) -> dict[str, Any]:
     """What the recorder stores about the run (bag metadata)."""
     info = config.describe()
-    info.update(duration=duration, mode='lockstep' if options.lockstep else 'realtime',
+    info.update(duration=duration, mode=LOCKSTEP if options.lockstep else REALTIME,
                 namespace=normalize_namespace(options.namespace), launcher='tiltrov launch')
     if not options.lockstep:
         info['real_time_factor'] = options.real_time_factor
@@ -248,9 +249,8 @@ def recorder_spec(options: LaunchOptions, config: StackConfig, duration: float,
                   raw: Sequence[str] = ()) -> NodeSpec:
     """The ``bag_recorder`` node recording every topic into ``--record DIR``.
 
-    The recorder (branch ``bags``) takes its parameters as ``params=`` in
-    process and as ``-p`` on its command line; it runs on sim time so the bag's
-    log times are the stack's.
+    The recorder takes its parameters as ``params=`` in process and as ``-p`` on
+    its command line; it runs on sim time so the bag's log times are the stack's.
     """
     assert options.record is not None
     overrides = {'output': str(Path(options.record).resolve()),
@@ -566,7 +566,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              'YAML file (default: pitch_hold)')
     parser.add_argument('--controller', choices=CONTROLLER_KINDS, default=None,
                         help="control law (default: config/wrench_controller.yaml's, pd)")
-    parser.add_argument('--allocator', choices=('robust', 'paper'), default=None,
+    parser.add_argument('--allocator', choices=ALLOCATOR_MODES, default=None,
                         help="allocation mode (default: config/thrust_allocator.yaml's, robust)")
     parser.add_argument('--duration', type=float, default=None, metavar='SEC',
                         help="sim time to run, s (default: the scenario's)")
