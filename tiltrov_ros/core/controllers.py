@@ -40,6 +40,7 @@ from tiltrov_ros.core.dynamics import restoring_forces
 from tiltrov_ros.core.errors import ParameterError
 from tiltrov_ros.core.kinematics import J, Rquat, euler_from_quat, quat_normalize, ssa
 from tiltrov_ros.core.params import RobotParams
+from tiltrov_ros.paths import config_file
 
 FloatArray = NDArray[np.float64]
 
@@ -235,7 +236,6 @@ class ControllerConfig:
 def load_controller_config(path: str | Path | None = None) -> ControllerConfig:
     """Read ``wrench_controller: ros__parameters:`` from a YAML file (default: shipped)."""
     if path is None:
-        from tiltrov_ros.paths import config_file
         path = config_file(CONTROLLER_YAML)
     source = str(path)
     with Path(path).open(encoding='utf-8') as stream:

@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 import yaml
 
 from tiltrov_ros.core.errors import ParameterError
+from tiltrov_ros.paths import config_file
 
 FloatArray = NDArray[np.float64]
 
@@ -237,7 +238,6 @@ def load_robot_params(path: str | Path | None = None) -> RobotParams:
         names the file).
     """
     if path is None:
-        from tiltrov_ros.paths import config_file
         path = config_file(ROBOT_YAML)
     path = Path(path)
     source = str(path)
@@ -263,7 +263,6 @@ def load_control_period(path: str | Path | None = None) -> float:
     node reads the same value; absent, it is the paper's 50 ms.
     """
     if path is None:
-        from tiltrov_ros.paths import config_file
         path = config_file(ROBOT_YAML)
     source = str(path)
     with Path(path).open(encoding='utf-8') as stream:

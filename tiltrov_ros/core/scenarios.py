@@ -66,6 +66,7 @@ from tiltrov_ros.core.errors import ParameterError, ScenarioError
 from tiltrov_ros.core.kinematics import quat_from_euler
 from tiltrov_ros.core.names import DOF_NAMES
 from tiltrov_ros.core.params import RobotParams
+from tiltrov_ros.paths import scenario_dir
 
 FloatArray = NDArray[np.float64]
 
@@ -205,7 +206,6 @@ class Scenario:
 
 def scenario_names() -> list[str]:
     """Names of the shipped scenarios (``config/scenarios/*.yaml``)."""
-    from tiltrov_ros.paths import scenario_dir
     return sorted(p.stem for p in scenario_dir().glob('*.yaml'))
 
 
@@ -213,7 +213,6 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     """A shipped scenario by name (``pitch_hold``) or any scenario file by path."""
     path = Path(name_or_path)
     if not path.suffix:
-        from tiltrov_ros.paths import scenario_dir
         path = scenario_dir() / f'{name_or_path}.yaml'
         if not path.is_file():
             raise ScenarioError(f'no scenario named {str(name_or_path)!r}; shipped: '
