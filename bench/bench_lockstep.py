@@ -93,7 +93,7 @@ def latency(seconds_of_sim: float, real_time_factor: float,
     from sensor_msgs.msg import JointState
 
     from tiltrov_ros.core.names import ODOM, THRUST_CMD, WRENCH_CMD
-    from tiltrov_ros.nodes.base import stamp_ns
+    from tiltrov_ros.nodes.conversions import stamp_ns
 
     args = ['--scenario', 'pitch_hold', '--realtime', '--real-time-factor',
             repr(float(real_time_factor)), '--duration', repr(seconds_of_sim),

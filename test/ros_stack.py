@@ -20,7 +20,7 @@ from sensor_msgs.msg import JointState
 
 from tiltrov_ros.core import names
 from tiltrov_ros.core.names import PLANT
-from tiltrov_ros.nodes.base import stamp_ns
+from tiltrov_ros.nodes.conversions import stamp_ns
 from tiltrov_ros.stack import supervisor as launcher
 
 NS = 1_000_000_000
@@ -230,6 +230,6 @@ def report(ros: Any, probe: Probe, node: Any) -> dict[str, str]:
 
 def finite_outputs(probe: Probe) -> bool:
     """No message the probe received carries NaN or infinity."""
-    from tiltrov_ros.nodes.base import message_is_finite
+    from tiltrov_ros.nodes.conversions import message_is_finite
     return all(message_is_finite(m) for topic, messages in probe.messages.items()
                for m in messages if topic != '/diagnostics')

@@ -22,7 +22,7 @@ from ros_stack import (
 
 from tiltrov_ros.core.names import ALLOCATOR, CONTROLLER, PLANT
 from tiltrov_ros.core.runner import run_scenario, stack_config
-from tiltrov_ros.nodes.base import make_executor
+from tiltrov_ros.nodes.executors import make_executor
 from tiltrov_ros.paths import config_file
 from tiltrov_ros.stack import supervisor as launcher
 

@@ -27,7 +27,7 @@ from sensor_msgs.msg import JointState
 from tiltrov_ros.core.allocation import load_allocator_config
 from tiltrov_ros.core.errors import ParameterError
 from tiltrov_ros.core.params import load_robot_params
-from tiltrov_ros.nodes.base import stamp_ns
+from tiltrov_ros.nodes.conversions import stamp_ns
 from tiltrov_ros.nodes.thrust_allocator import ThrustAllocatorNode
 from tiltrov_ros.paths import config_file
 

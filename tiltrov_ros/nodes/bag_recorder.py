@@ -55,16 +55,17 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.subscription import Subscription
 from rosbags.interfaces import Connection
 
-from .. import __version__
-from ..bag.bagfile import RUN_INFO_KEY, parse_run_info
-from ..bag.msgdefs import message_class, message_definition
-from ..bag.qos import matches, subscription_qos, to_bag_qos
-from ..bag.topics import is_hidden, normalize_type
-from ..bag.writer import COMPRESSIONS, BagWriter
-from ..core.errors import BagError, ParameterError, TiltrovError
-from ..core.names import CLOCK, RECORDER, STACK_TOPICS
-from ..core.timebase import cdr_stamp_ns
-from .base import descriptor
+from tiltrov_ros import __version__
+from tiltrov_ros.bag.bagfile import RUN_INFO_KEY, parse_run_info
+from tiltrov_ros.bag.msgdefs import message_class, message_definition
+from tiltrov_ros.bag.qos import matches, subscription_qos, to_bag_qos
+from tiltrov_ros.bag.topics import is_hidden, normalize_type
+from tiltrov_ros.bag.writer import COMPRESSIONS, BagWriter
+from tiltrov_ros.core.errors import BagError, ParameterError, TiltrovError
+from tiltrov_ros.core.names import CLOCK, RECORDER, STACK_TOPICS
+from tiltrov_ros.core.timebase import cdr_stamp_ns
+
+from .parameters import descriptor
 
 VERSION_KEY = 'tiltrov.version'
 _DRAIN_LIMIT = 1000       # messages taken per callback, for fairness between topics

@@ -79,27 +79,18 @@ from tiltrov_ros.core.validation import (
     failed_thruster_indices,
 )
 
-from .base import (
-    OK,
-    PUBLISHER_QOS,
-    RELIABLE_QOS,
-    THROTTLE,
-    WARN,
-    Overrides,
-    TiltrovNode,
-    declare_failed_thrusters,
-    declare_robot,
-    descriptor,
+from .base import OK, THROTTLE, WARN, TiltrovNode, guarded, input_callback
+from .conversions import (
     fill_joint_state,
     fill_odometry,
-    guarded,
-    input_callback,
     joint_state_values,
-    main_loop,
     new_joint_state,
     new_odometry,
     set_stamp,
 )
+from .executors import main_loop
+from .parameters import Overrides, declare_failed_thrusters, declare_robot, descriptor
+from .qos import PUBLISHER_QOS, RELIABLE_QOS
 
 #: joint_states value of a field a joint does not have (thruster position and
 #: velocity, servo effort): 0.0, since no topic carries NaN (README.md, "Reliability").

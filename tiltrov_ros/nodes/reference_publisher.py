@@ -40,23 +40,11 @@ from tiltrov_ros.core.scenarios import ReferenceProfile, load_scenario
 from tiltrov_ros.core.timebase import format_ns, seconds, to_ns
 from tiltrov_ros.core.validation import checked_stamp_ns
 
-from .base import (
-    CLOCK_READER_QOS,
-    OK,
-    PUBLISHER_QOS,
-    THROTTLE,
-    WARN,
-    Overrides,
-    TiltrovNode,
-    declare_robot,
-    descriptor,
-    fill_pose,
-    fill_twist,
-    guarded,
-    input_callback,
-    main_loop,
-    stamp_ns,
-)
+from .base import OK, THROTTLE, WARN, TiltrovNode, guarded, input_callback
+from .conversions import fill_pose, fill_twist, stamp_ns
+from .executors import main_loop
+from .parameters import Overrides, declare_robot, descriptor
+from .qos import CLOCK_READER_QOS, PUBLISHER_QOS
 
 #: eta_d = 0 for ever: the reference without a scenario.
 HOLD_ORIGIN = ReferenceProfile(((),) * 6)

@@ -67,30 +67,21 @@ from tiltrov_ros.core.validation import (
     limit_command,
 )
 
-from .base import (
-    OK,
-    PUBLISHER_QOS,
-    RELIABLE_QOS,
-    THROTTLE,
-    WARN,
+from .base import OK, THROTTLE, WARN, TiltrovNode, guarded, input_callback
+from .conversions import (
     FloatArray,
-    InputWatchdog,
-    Overrides,
-    TiltrovNode,
-    declare_failed_thrusters,
-    declare_robot,
-    descriptor,
     fill_joint_state,
     fill_wrench,
-    guarded,
-    input_callback,
     joint_state_values,
-    main_loop,
     new_joint_state,
     new_wrench,
     stamp_ns,
     wrench_array,
 )
+from .executors import main_loop
+from .parameters import Overrides, declare_failed_thrusters, declare_robot, descriptor
+from .qos import PUBLISHER_QOS, RELIABLE_QOS
+from .watchdog import InputWatchdog
 
 TILT_REQUEST_MODES = ('auto', 'required', 'ignored')
 #: s (wall): how often a wrench waiting for its tilt request is looked at.

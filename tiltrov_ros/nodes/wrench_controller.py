@@ -70,31 +70,22 @@ from tiltrov_ros.core.validation import (
     check_quaternion,
 )
 
-from .base import (
-    OK,
-    PUBLISHER_QOS,
-    RELIABLE_QOS,
-    THROTTLE,
-    WARN,
+from .base import OK, THROTTLE, WARN, TiltrovNode, guarded, input_callback
+from .conversions import (
     FloatArray,
-    InputWatchdog,
-    Overrides,
-    TiltrovNode,
-    declare_robot,
-    descriptor,
     fill_joint_state,
     fill_wrench,
-    guarded,
-    input_callback,
-    main_loop,
     new_joint_state,
     new_wrench,
     odometry_arrays,
     pose_arrays,
-    reader_qos,
     stamp_ns,
     twist_array,
 )
+from .executors import main_loop
+from .parameters import Overrides, declare_robot, descriptor
+from .qos import PUBLISHER_QOS, RELIABLE_QOS, reader_qos
+from .watchdog import InputWatchdog
 
 #: s (wall): how often the lockstep watchdog looks at a waiting tick.
 WATCHDOG_PERIOD = 0.1

@@ -500,7 +500,7 @@ def run_single_process(specs: Sequence[NodeSpec], namespace: str, out: _Output,
                        summary: str, executor_kind: str | None = None) -> int:
     """Every node in this process, bound to one context.
 
-    The stack nodes share one executor (``nodes.base.make_executor``). The
+    The stack nodes share one executor (``nodes.executors.make_executor``). The
     recorder, if any, spins on its own SingleThreadedExecutor in a second
     thread: it takes queued messages itself inside its callbacks, which the
     EventsExecutor (one take per event) does not allow, and it stays off the
@@ -511,7 +511,7 @@ def run_single_process(specs: Sequence[NodeSpec], namespace: str, out: _Output,
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
 
-    from tiltrov_ros.nodes.base import STARTUP_ERRORS, make_executor, spin_until
+    from tiltrov_ros.nodes.executors import STARTUP_ERRORS, make_executor, spin_until
 
     context = Context()
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
