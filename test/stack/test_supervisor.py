@@ -99,7 +99,7 @@ def test_record_starts_the_recorder_first(tmp_path: Path) -> None:
     options = LaunchOptions(duration=1.0, record=tmp_path / 'bag')
     specs, _, _ = stack_specs(options)
     recorder = specs[0]
-    assert recorder.name == 'bag_recorder' and recorder.overrides_kwarg == 'params'
+    assert recorder.name == 'bag_recorder'
     assert recorder.overrides['use_sim_time'] is True
     # The plant waits for the recorder too before it starts the run.
     assert _spec(specs, 'plant_simulator').overrides['startup_subscribers'] == 2

@@ -20,7 +20,8 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 import math
 
-from tiltrov_ros.core.errors import ParameterError, TiltrovError
+from tiltrov_ros.core.errors import TiltrovError
+from tiltrov_ros.core.paramtable import Param, ParamTable
 from tiltrov_ros.core.timebase import NS_PER_S, format_ns, stamp_to_ns, to_ns
 
 NON_FINITE = 'non_finite'          # NaN or infinity in a value the node uses
@@ -190,19 +191,20 @@ def limit_command(thrusts: Sequence[float], tilts: Sequence[float], max_thrust: 
     return out_f, out_a
 
 
-def failed_thruster_indices(value: object, name: str = 'failed_thrusters') -> tuple[int, ...]:
-    """Core indices 0..3 of a ``failed_thrusters`` value: thruster numbers 1..4
-    (thruster_1..thruster_4), or empty. Raises ParameterError naming ``name``."""
+#: ``failed_thrusters`` (plant and allocator nodes): the thrusters that give no thrust.
+FAILED_THRUSTERS = ParamTable('failed thrusters', [
+    Param('failed_thrusters', 'ints', [], 'thrusters that give no thrust, by number: '
+          '1..4 = thruster_1..thruster_4 (e.g. [2])', low=1, high=4, distinct=True,
+          note=' (thruster numbers; [] for none)'),
+])
+
+
+def failed_thruster_indices(value: object) -> tuple[int, ...]:
+    """Core indices 0..3 of a ``failed_thrusters`` value (:data:`FAILED_THRUSTERS`):
+    thruster numbers 1..4 (thruster_1..thruster_4), or empty. Raises ParameterError."""
     if value is None:
         return ()
-    if isinstance(value, (str, bytes)) or not isinstance(value, Iterable):
-        raise ParameterError(name, f'got {value!r}; allowed: a list of thruster numbers '
-                                   '1..4 (thruster_1..thruster_4), [] for none')
-    numbers = list(value)
-    if not all(isinstance(n, int) and not isinstance(n, bool) and 1 <= n <= 4
-               for n in numbers) or len(set(numbers)) != len(numbers):
-        raise ParameterError(name, f'got {numbers!r}; allowed: distinct thruster numbers '
-                                   '1..4 (thruster_1..thruster_4), [] for none')
+    numbers = FAILED_THRUSTERS.check('failed_thrusters', value)
     return tuple(sorted(n - 1 for n in numbers))
 
 

@@ -63,9 +63,11 @@ from tiltrov_ros.bag.topics import is_hidden, normalize_type
 from tiltrov_ros.bag.writer import COMPRESSIONS, BagWriter
 from tiltrov_ros.core.errors import BagError, ParameterError, TiltrovError
 from tiltrov_ros.core.names import CLOCK, RECORDER, STACK_TOPICS
+from tiltrov_ros.core.paramtable import UNSET, Param, ParamTable
 from tiltrov_ros.core.timebase import cdr_stamp_ns
 
-from .parameters import descriptor
+from .base import TiltrovNode
+from .parameters import Overrides, check, declare
 
 VERSION_KEY = 'tiltrov.version'
 _DRAIN_LIMIT = 1000       # messages taken per callback, for fairness between topics
@@ -87,8 +89,29 @@ class RecorderConfig:
     run_info: str
 
 
-#: The recorder's parameters are read-only unless declared otherwise.
-_descriptor = functools.partial(descriptor, read_only=True)
+#: The recorder's parameters (read-only but run_info, which may be set while recording).
+RECORDER_PARAMS = ParamTable('bag_recorder', [
+    Param('output', 'str', '', 'bag directory to create (must not exist); empty: '
+          'rosbag2_YYYY_MM_DD-HH_MM_SS in the working directory', read_only=True),
+    # String arrays are declared without a default: an empty YAML list reads as unset.
+    Param('topics', 'strs', UNSET, 'topics to record (relative names resolve in the node '
+          'namespace); unset or empty: every topic', read_only=True),
+    Param('exclude_topics', 'strs', UNSET, 'topics never recorded when recording every topic',
+          read_only=True),
+    Param('include_hidden', 'bool', False, 'when recording every topic, also record hidden '
+          'topics (a name token starting with _)', read_only=True),
+    Param('compression', 'str', 'none', 'MCAP chunk compression', choices=COMPRESSIONS,
+          read_only=True),
+    Param('queue_depth', 'int', 10000, 'history depth of each subscription; 0: KEEP_ALL',
+          low=0, high=1_000_000, read_only=True),
+    Param('discovery_period', 'float', 0.5, 'seconds (wall clock) between polls of the ROS '
+          'graph for new topics', 's', low=0.05, high=60.0, read_only=True),
+    Param('flush_period', 'float', 1.0, 'seconds (wall clock) between writes of the pending '
+          'MCAP chunk to disk, which bounds what a killed recorder loses; 0: only when a chunk '
+          'is full (1 MiB)', 's', low=0.0, high=3600.0, read_only=True),
+    Param('run_info', 'str', '{}', 'JSON object describing the run (scenario, controller, '
+          'robot limits, ...), stored in the bag metadata as custom_data "tiltrov.run_info"'),
+])
 
 
 def declare_parameters(node: Node) -> RecorderConfig:
@@ -99,45 +122,16 @@ def declare_parameters(node: Node) -> RecorderConfig:
             by rclpy's descriptors at declaration).
 
     """
-    d = node.declare_parameter
-    output = d('output', '', _descriptor(
-        'bag directory to create (must not exist); empty: rosbag2_YYYY_MM_DD-HH_MM_SS '
-        'in the working directory')).value
-    # String arrays are declared without a default: an empty YAML list reads as unset.
-    topics = d('topics', Parameter.Type.STRING_ARRAY, _descriptor(
-        'topics to record (relative names resolve in the node namespace); '
-        'unset or empty: every topic')).value or []
-    exclude = d('exclude_topics', Parameter.Type.STRING_ARRAY, _descriptor(
-        'topics never recorded when recording every topic')).value or []
-    include_hidden = d('include_hidden', False, _descriptor(
-        'when recording every topic, also record hidden topics (a name token '
-        'starting with _)')).value
-    compression = d('compression', 'none', _descriptor(
-        'MCAP chunk compression', constraints='none or zstd')).value
-    depth = d('queue_depth', 10000, _descriptor(
-        'history depth of each subscription; 0: KEEP_ALL', integer=(0, 1_000_000))).value
-    discovery = d('discovery_period', 0.5, _descriptor(
-        'seconds (wall clock) between polls of the ROS graph for new topics',
-        floating=(0.05, 60.0))).value
-    flush = d('flush_period', 1.0, _descriptor(
-        'seconds (wall clock) between writes of the pending MCAP chunk to disk, which '
-        'bounds what a killed recorder loses; 0: only when a chunk is full (1 MiB)',
-        floating=(0.0, 3600.0))).value
-    run_info = d('run_info', '{}', _descriptor(
-        'JSON object describing the run (scenario, controller, robot limits, ...), '
-        'stored in the bag metadata as custom_data "tiltrov.run_info"',
-        read_only=False)).value
-    if compression not in COMPRESSIONS:
-        raise ParameterError('compression', f'{compression!r} is not one of {COMPRESSIONS}')
+    v = check(RECORDER_PARAMS, declare(node, RECORDER_PARAMS))
     try:
-        parse_run_info(run_info)
+        parse_run_info(v['run_info'])
     except BagError as exc:
         raise ParameterError('run_info', str(exc)) from None
     return RecorderConfig(
-        output=output, topics=tuple(topics), exclude_topics=tuple(exclude),
-        include_hidden=bool(include_hidden), compression=compression,
-        queue_depth=int(depth), discovery_period=float(discovery),
-        flush_period=float(flush), run_info=run_info)
+        output=v['output'], topics=v['topics'] or (), exclude_topics=v['exclude_topics'] or (),
+        include_hidden=v['include_hidden'], compression=v['compression'],
+        queue_depth=v['queue_depth'], discovery_period=v['discovery_period'],
+        flush_period=v['flush_period'], run_info=v['run_info'])
 
 
 @dataclass
@@ -171,28 +165,27 @@ class _Topic:
     warned: set[str] = field(default_factory=set)
 
 
-class BagRecorder(Node):
+class BagRecorder(TiltrovNode):
     """Records topics into a rosbag2/MCAP bag (see the module docstring).
 
-    Args:
-        params: parameter values (``{'output': 'runs/x', 'run_info': '{...}'}``),
-            applied as overrides on top of ``cli_args``/parameter files.
-        node_name, namespace, context, cli_args: as for :class:`rclpy.node.Node`.
+    Constructed as every node of the package (:class:`~tiltrov_ros.nodes.base.TiltrovNode`:
+    ``node_name``, ``namespace``, ``context``, ``cli_args``, ``parameter_overrides``,
+    e.g. ``{'output': 'runs/x', 'run_info': '{...}'}``, which win over parameter
+    files). It publishes no /diagnostics and never waits for itself.
 
     Raises:
-        ParameterError, rclpy ParameterException: invalid parameters.
+        ParameterError: invalid parameters.
         BagError: the output directory exists or cannot be created.
 
     """
 
-    def __init__(self, *, params: Mapping[str, Any] | None = None,
-                 node_name: str = RECORDER, namespace: str | None = None,
-                 context: Context | None = None,
-                 cli_args: Sequence[str] | None = None) -> None:
-        overrides = [Parameter(name, value=value) for name, value in (params or {}).items()]
-        super().__init__(node_name, namespace=namespace, context=context,
-                         cli_args=list(cli_args) if cli_args is not None else None,
-                         parameter_overrides=overrides)
+    stack_node = False
+
+    def __init__(self, *, node_name: str = RECORDER, namespace: str | None = None,
+                 context: Context | None = None, cli_args: Sequence[str] | None = None,
+                 parameter_overrides: Overrides = None) -> None:
+        super().__init__(node_name, namespace=namespace, context=context, cli_args=cli_args,
+                         parameter_overrides=parameter_overrides)
         self.config = declare_parameters(self)
         output = self.config.output or datetime.now().strftime('rosbag2_%Y_%m_%d-%H_%M_%S')
         self._bag = BagWriter(output, compression=self.config.compression, custom_data={

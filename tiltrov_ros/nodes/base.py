@@ -9,7 +9,7 @@ from collections.abc import Callable, Sequence
 import functools
 import sys
 import time
-from typing import Any, TypeVar
+from typing import Any, ClassVar, TypeVar
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
@@ -27,11 +27,12 @@ from rclpy.qos import QoSProfile
 from tiltrov_ros.core import validation
 from tiltrov_ros.core.errors import ParameterError
 from tiltrov_ros.core.names import DIAGNOSTICS
+from tiltrov_ros.core.paramtable import Param, ParamTable
 from tiltrov_ros.core.timebase import NS_PER_S
 from tiltrov_ros.core.validation import InvalidInput, StampBounds
 
 from .conversions import message_is_finite
-from .parameters import Overrides, allowed_text, as_parameters, descriptor, parameter_source
+from .parameters import Overrides, allowed_text, as_parameters, declare, parameter_source
 from .qos import RELIABLE_QOS
 
 #: s: repeated warnings from callbacks are throttled to one per this period.
@@ -44,6 +45,21 @@ RECORDER_POLL = 0.02
 RECORDER_WAIT = 10.0
 #: DiagnosticStatus levels as ints (the message field is a byte).
 OK, WARN, ERROR = 0, 1, 2
+
+#: ``wait_for_recorder`` (stack nodes; ``tiltrov launch --record`` sets it in lockstep).
+RECORDER_HOLD = ParamTable('recorder hold', [
+    Param('wait_for_recorder', 'str', '', 'name of the bag recorder node: publish nothing '
+          f'until it reads every topic of this node (at most {RECORDER_WAIT:g} s); empty: do '
+          'not wait. tiltrov launch --record sets it in lockstep.', read_only=True),
+])
+#: ``stamp_max_future``, ``stamp_max_age``: input stamps against the node's clock.
+STAMP_BOUNDS = ParamTable('input stamps', [
+    Param('stamp_max_future', 'float', 0.5, "input stamps more than this ahead of the node's "
+          'clock are rejected (sim time: /clock, the plant its own; not checked on system '
+          'time); 0: not checked', 's', low=0.0, high=1e6),
+    Param('stamp_max_age', 'float', 5.0, "input stamps more than this behind the node's clock "
+          'are rejected; 0: not checked', 's', low=0.0, high=1e9),
+])
 
 
 def steady_clock() -> Clock:
@@ -171,6 +187,10 @@ class TiltrovNode(Node):
         Values that win over parameter files.
     """
 
+    #: The stack's nodes publish /diagnostics and may hold their outputs for the
+    #: recorder (:data:`RECORDER_HOLD`); the recorder itself does neither.
+    stack_node: ClassVar[bool] = True
+
     def __init__(self, node_name: str, *, namespace: str | None = None,
                  context: Context | None = None, cli_args: Sequence[str] | None = None,
                  parameter_overrides: Overrides = None) -> None:
@@ -181,8 +201,9 @@ class TiltrovNode(Node):
         self._source_args = [*(cli_args or ()), *sys.argv]
         self.callback_errors = 0
         self.steady = steady_clock()
-        self._diagnostics_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS,
-                                                      RELIABLE_QOS)
+        self._diagnostics_pub = (self.create_publisher(DiagnosticArray, DIAGNOSTICS,
+                                                       RELIABLE_QOS)
+                                 if self.stack_node else None)
         self._diagnostics_msg = DiagnosticArray()
         #: (topic, reason) -> messages rejected (see core/validation.py).
         self.rejections: Counter[tuple[str, str]] = Counter()
@@ -199,10 +220,8 @@ class TiltrovNode(Node):
         # matched a writer is not recorded; a node started again mid-run (--respawn)
         # is otherwise discovered by the plant first and by the recorder up to
         # seconds later (no multicast), while lockstep runs on.
-        self.recorder_node = str(self.declare_parameter('wait_for_recorder', '', descriptor(
-            'name of the bag recorder node: publish nothing until it reads every topic of '
-            'this node (at most RECORDER_WAIT s); empty: do not wait. tiltrov launch '
-            '--record sets it in lockstep.', read_only=True)).value)
+        self.recorder_node = (str(declare(self, RECORDER_HOLD)['wait_for_recorder'])
+                              if self.stack_node else '')
         self._held: list[tuple[SafePublisher, Any]] = []
         self._holding = bool(self.recorder_node)
         self._hold_since = time.monotonic()
@@ -243,15 +262,10 @@ class TiltrovNode(Node):
     # -- input validation -------------------------------------------------------
 
     def declare_stamp_bounds(self) -> None:
-        """Declare ``stamp_max_future`` and ``stamp_max_age`` (s, run-time changeable)."""
-        future = self.declare_parameter('stamp_max_future', 0.5, descriptor(
-            'input stamps more than this ahead of the node\'s clock are rejected, s (sim time: '
-            '/clock, the plant its own; not checked on system time); 0: not checked',
-            floating=(0.0, 1e6))).value
-        age = self.declare_parameter('stamp_max_age', 5.0, descriptor(
-            'input stamps more than this behind the node\'s clock are rejected, s; '
-            '0: not checked', floating=(0.0, 1e9))).value
-        self.stamp_bounds = StampBounds.from_seconds(future, age)
+        """Declare :data:`STAMP_BOUNDS` (s, run-time changeable)."""
+        bounds = declare(self, STAMP_BOUNDS)
+        self.stamp_bounds = StampBounds.from_seconds(bounds['stamp_max_future'],
+                                                     bounds['stamp_max_age'])
         self.add_post_set_parameters_callback(self._apply_stamp_bounds)
 
     def _apply_stamp_bounds(self, parameters: list[Parameter]) -> None:
@@ -261,13 +275,6 @@ class TiltrovNode(Node):
                 self.get_parameter('stamp_max_age').value)
 
     # -- watchdogs ---------------------------------------------------------------
-
-    def declare_timeout(self, name: str, default: float, text: str) -> float:
-        """Declare a watchdog timeout ``name`` (s, run-time changeable, 0: off)."""
-        value = self.declare_parameter(name, default, descriptor(
-            f'{text}, s; on sim time measured on /clock, else wall time since the message '
-            'arrived; 0: off', floating=(0.0, 3600.0))).value
-        return float(value)
 
     def input_age_ns(self, stamp: int, received: int) -> int:
         """How old an input stamped ``stamp`` that arrived at steady time ``received`` is:
@@ -440,7 +447,8 @@ class TiltrovNode(Node):
         msg = self._diagnostics_msg
         msg.header.stamp = self.get_clock().now().to_msg()
         msg.status = [status]
-        self._diagnostics_pub.publish(msg)
+        if self._diagnostics_pub is not None:
+            self._diagnostics_pub.publish(msg)
 
     def check_overrides(self) -> None:
         """Warn about parameters given (file or -p) that this node does not have.

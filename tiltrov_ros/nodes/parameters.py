@@ -1,9 +1,10 @@
-"""Node parameters: declaration with descriptors, the robot block, error messages
-naming the file a value came from, and overrides."""
+"""Node parameters from the tables of :mod:`tiltrov_ros.core.paramtable`: ROS
+descriptors, declaration, the shared robot block, and error messages that name
+the file a value came from."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 import math
 from typing import Any
 
@@ -13,61 +14,87 @@ from rclpy.parameter import Parameter
 import yaml
 
 from tiltrov_ros.core import validation
-from tiltrov_ros.core.errors import ParameterError
-from tiltrov_ros.core.params import RobotParams, load_control_period, load_robot_params
+from tiltrov_ros.core.params import (
+    ROBOT,
+    STACK,
+    RobotParams,
+    load_control_period,
+    load_robot_params,
+)
+from tiltrov_ros.core.paramtable import UNSET, Param, ParamTable
+
+#: ROS type of a parameter declared without a value.
+_ROS_TYPES = {'float': Parameter.Type.DOUBLE, 'int': Parameter.Type.INTEGER,
+              'bool': Parameter.Type.BOOL, 'str': Parameter.Type.STRING,
+              'floats': Parameter.Type.DOUBLE_ARRAY, 'ints': Parameter.Type.INTEGER_ARRAY,
+              'strs': Parameter.Type.STRING_ARRAY}
+_CONVERT = {'float': float, 'int': int, 'bool': bool, 'str': str}
 
 
-def descriptor(description: str, *, read_only: bool = False,
-               floating: tuple[float, float] | None = None,
-               integer: tuple[int, int] | None = None,
-               constraints: str = '') -> ParameterDescriptor:
-    """A ParameterDescriptor with an optional range (shown by ``ros2 param describe``)."""
-    d = ParameterDescriptor(description=description, read_only=read_only,
-                            additional_constraints=constraints)
-    if floating is not None:
-        d.floating_point_range = [FloatingPointRange(from_value=float(floating[0]),
-                                                     to_value=float(floating[1]), step=0.0)]
-    if integer is not None:
-        d.integer_range = [IntegerRange(from_value=integer[0], to_value=integer[1], step=1)]
+def descriptor(param: Param) -> ParameterDescriptor:
+    """The ROS descriptor of a table line (``ros2 param describe`` shows it): the
+    description with its unit, what is allowed, read-only, and the range ROS itself
+    enforces (closed: an open bound is the table's check)."""
+    unit = f' [{param.unit}]' if param.unit and param.unit != '-' else ''
+    d = ParameterDescriptor(description=param.description + unit, read_only=param.read_only,
+                            additional_constraints=param.allowed())
+    if param.kind == 'float' and param.bounded:
+        d.floating_point_range = [FloatingPointRange(from_value=float(param.low),
+                                                     to_value=float(param.high), step=0.0)]
+    if param.kind == 'int' and math.isfinite(param.low) and math.isfinite(param.high):
+        d.integer_range = [IntegerRange(from_value=int(param.low), to_value=int(param.high),
+                                        step=1)]
     return d
 
 
-# robot.* (config/robot.yaml, '/**'): description and range of each scalar. Read-only.
-_ROBOT_DOC: dict[str, tuple[str, tuple[float, float] | None]] = {
-    'mass_matrix': ('diagonal of M (A.2), rigid body + added mass: kg (surge, sway, heave), '
-                    'kg m^2 (roll, pitch, yaw); 6 numbers > 0', None),
-    'quadratic_damping': ('quadratic damping d_i of (A.4), D(nu) = diag(d_i |nu_i|): '
-                          'N s^2/m^2, N m s^2; 6 numbers >= 0', None),
-    'linear_damping': ('linear damping added to (A.4): N s/m, N m s; 6 numbers >= 0', None),
-    'weight': ('W = m g, N (> 0)', (0.0, math.inf)),
-    'buoyancy': ('B, N (>= 0)', (0.0, math.inf)),
-    'center_of_gravity': ('nominal r_g in base_link_frd, m (3 numbers)', None),
-    'center_of_buoyancy': ('r_b in base_link_frd, m (3 numbers)', None),
-    'length': ('l, thruster spacing along x, m (> 0)', (0.0, math.inf)),
-    'width': ('d, thruster spacing along y, m (> 0)', (0.0, math.inf)),
-    'max_thrust': ('thrust limit of each thruster in both directions, N (> 0)',
-                   (0.0, math.inf)),
-    'thruster_time_constant': ('first-order thruster time constant, s (0: ideal)',
-                               (0.0, math.inf)),
-    'tilt_min': ('lower servo angle limit, rad', (-math.pi, math.pi)),
-    'tilt_max': ('upper servo angle limit, rad', (-math.pi, math.pi)),
-    'tilt_rate_limit': ('servo rate limit, rad/s (> 0)', (0.0, math.inf)),
-}
+def _ros_value(param: Param, value: Any) -> Any:
+    if param.is_array:
+        item = _CONVERT[{'floats': 'float', 'ints': 'int', 'strs': 'str'}[param.kind]]
+        return [item(v) for v in value]
+    return _CONVERT[param.kind](value)
+
+
+def declare(node: Node, table: ParamTable, *, defaults: Mapping[str, Any] | None = None,
+            only: Iterable[str] | None = None) -> dict[str, Any]:
+    """Declare ``table``'s parameters (``only`` these names) on ``node`` with their
+    descriptors; return name -> value (lists for arrays, None for an unset one).
+
+    ``defaults`` replace the table's (the shipped files' values for SHIPPED
+    lines). An array declared empty (``[]``) has dynamic typing: it has no
+    element type to check.
+    """
+    wanted = set(table.names if only is None else only)
+    values: dict[str, Any] = {}
+    for param in table:
+        if param.name not in wanted:
+            continue
+        default = (defaults or {}).get(param.name, param.default)
+        d = descriptor(param)
+        name = table.full_name(param.name)
+        if default is UNSET:
+            value = node.declare_parameter(name, _ROS_TYPES[param.kind], d).value
+        else:
+            ros_default = _ros_value(param, default)
+            if param.is_array and not ros_default:
+                d.dynamic_typing = True
+            value = node.declare_parameter(name, ros_default, d).value
+        values[param.name] = list(value) if param.is_array and value is not None else value
+    return values
+
+
+def check(table: ParamTable, values: Mapping[str, Any]) -> dict[str, Any]:
+    """``values`` (from :func:`declare`) checked against ``table``: the choices,
+    array sizes and open bounds ROS does not enforce. Unset ones stay None."""
+    return {name: (value if value is None else table.check(name, value))
+            for name, value in values.items()}
 
 
 def allowed_text(d: ParameterDescriptor | None, default: Any) -> str:
-    """What a parameter accepts, from its descriptor and default (for error messages)."""
-    kind = {bool: 'true or false', int: 'an integer', float: 'a number', str: 'a string',
+    """What a parameter accepts (for error messages): its descriptor's allowed text."""
+    if d is not None and d.additional_constraints:
+        return str(d.additional_constraints)
+    return {bool: 'true or false', int: 'an integer', float: 'a number', str: 'a string',
             list: 'a list'}.get(type(default), 'a value of the declared type')
-    parts = [kind]
-    if d is not None:
-        for r in d.floating_point_range:
-            parts.append(f'in [{r.from_value:g}, {r.to_value:g}]')
-        for r in d.integer_range:
-            parts.append(f'in [{r.from_value}, {r.to_value}]')
-        if d.additional_constraints:
-            parts.append(f'({d.additional_constraints})')
-    return ' '.join(parts)
 
 
 def _flatten(doc: Any, prefix: str = '') -> set[str]:
@@ -103,15 +130,15 @@ def parameter_source(name: str, node_name: str, args: Sequence[str]) -> str | No
 
 
 def declare_failed_thrusters(node: Node) -> tuple[int, ...]:
-    """Declare ``failed_thrusters`` (thruster numbers 1..4, run-time changeable) and
-    return the core indices (0..3). Validated by
-    :func:`tiltrov_ros.core.validation.failed_thruster_indices`."""
-    d = descriptor('thrusters that give no thrust, by number: 1..4 = thruster_1..thruster_4 '
-                   '(e.g. [2]); [] none; settable at run time',
-                   constraints='distinct integers 1..4')
-    d.dynamic_typing = True     # [] has no element type
-    value = node.declare_parameter('failed_thrusters', [], d).value
+    """Declare ``failed_thrusters`` (:data:`~tiltrov_ros.core.validation.FAILED_THRUSTERS`,
+    run-time changeable) and return the core indices (0..3)."""
+    value = declare(node, validation.FAILED_THRUSTERS)['failed_thrusters']
     return validation.failed_thruster_indices(value)
+
+
+def robot_defaults() -> dict[str, Any]:
+    """The shipped ``config/robot.yaml``: the defaults of ``robot.*`` and ``control_period``."""
+    return {**load_robot_params().as_dict(), 'control_period': load_control_period()}
 
 
 def declare_robot(node: Node) -> tuple[RobotParams, float]:
@@ -123,27 +150,10 @@ def declare_robot(node: Node) -> tuple[RobotParams, float]:
     (:class:`~tiltrov_ros.core.params.RobotParams`); an invalid value raises
     :class:`~tiltrov_ros.core.errors.ParameterError` naming it.
     """
-    shipped = load_robot_params().as_dict()
-    values: dict[str, Any] = {}
-    for name, (text, rng) in _ROBOT_DOC.items():
-        default = shipped[name]
-        if isinstance(default, list):
-            default = [float(v) for v in default]
-        else:
-            default = float(default)
-        param = node.declare_parameter(f'robot.{name}', default,
-                                       descriptor(text, read_only=True, floating=rng))
-        values[name] = list(param.value) if isinstance(default, list) else param.value
-    period = node.declare_parameter(
-        'control_period', load_control_period(),
-        descriptor('control period T of the stack, s (a multiple of the plant step); '
-                   'control ticks are the sim times that are multiples of T',
-                   read_only=True, floating=(0.0, 60.0))).value
-    robot = RobotParams.from_mapping(values)
-    if not period > 0:
-        raise ParameterError('control_period', f'got {period!r}; allowed: a number of '
-                             'seconds > 0')
-    return robot, float(period)
+    shipped = robot_defaults()
+    values = declare(node, ROBOT, defaults=shipped)
+    period = check(STACK, declare(node, STACK, defaults=shipped))['control_period']
+    return RobotParams.from_mapping(values), period
 
 
 Overrides = Mapping[str, Any] | Sequence[Parameter] | None

@@ -35,7 +35,7 @@ acknowledged the last messages (the launcher ends the run on it).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 import sys
 from typing import Any
 
@@ -47,30 +47,19 @@ from rclpy.task import Future
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 
-from tiltrov_ros.core.disturbances import Disturbances
-from tiltrov_ros.core.errors import ParameterError
-from tiltrov_ros.core.kinematics import quat_from_euler
 from tiltrov_ros.core.names import (
     CLOCK,
     JOINT_STATES,
     LOCKSTEP,
-    MODES,
     ODOM,
     PLANT,
-    REALTIME,
     THRUST_CMD,
     THRUSTERS,
     TILT_CMD,
     TILTS,
 )
-from tiltrov_ros.core.params import RobotParams
-from tiltrov_ros.core.plant import Plant
 from tiltrov_ros.core.scenarios import (
-    InitialState,
-    Scenario,
-    ThrusterFault,
     failed_at,
-    load_scenario,
 )
 from tiltrov_ros.core.timebase import format_ns, seconds, to_ns
 from tiltrov_ros.core.validation import (
@@ -89,7 +78,8 @@ from .conversions import (
     set_stamp,
 )
 from .executors import main_loop
-from .parameters import Overrides, declare_failed_thrusters, declare_robot, descriptor
+from .parameters import Overrides
+from .plant_config import declare_parameters
 from .qos import PUBLISHER_QOS, RELIABLE_QOS
 
 #: joint_states value of a field a joint does not have (thruster position and
@@ -106,112 +96,6 @@ MAX_CATCH_UP = 100
 MAX_PENDING = 100
 #: Marks a command that was received for a tick but rejected (held: previous stays).
 _REJECTED: list[float] = []
-
-
-@dataclass(frozen=True)
-class PlantConfig:
-    """The plant node's parameters, validated."""
-
-    mode: str
-    real_time_factor: float
-    step_ns: int
-    control_period_ns: int
-    robot: RobotParams               # nominal robot, scenario overrides applied
-    disturbances: Disturbances
-    initial_state: InitialState
-    scenario: str                    # name, path or '' (none)
-    duration_ns: int                 # 0: no end
-    exit_at_end: bool
-    stall_timeout: float             # s, wall
-    startup_subscribers: int
-    startup_delay: float             # s, wall
-    command_timeout: float = 0.5     # s, sim time; 0: off
-    failed_thrusters: tuple[int, ...] = ()          # indices 0..3 (parameter)
-    faults: tuple[ThrusterFault, ...] = ()          # the scenario's
-
-    def build_plant(self) -> Plant:
-        """The plant at the initial state, as ``StackConfig.build_plant`` makes it."""
-        init = self.initial_state
-        return Plant(self.robot, self.disturbances, step_ns=self.step_ns,
-                     position=init.position, quaternion=quat_from_euler(*init.euler),
-                     nu=init.nu)
-
-
-def declare_parameters(node: TiltrovNode) -> PlantConfig:
-    """Declare the plant's parameters on ``node`` and return them validated."""
-    d = node.declare_parameter
-    mode = d('mode', REALTIME, descriptor(
-        'lockstep: as fast as possible, deterministic, waits at each control tick for '
-        'the thrust_cmd and tilt_cmd stamped with it; realtime: wall-clock stepping',
-        read_only=True, constraints='lockstep or realtime')).value
-    rtf = d('real_time_factor', 1.0, descriptor(
-        'realtime mode: sim seconds per wall second (1.0 = wall clock)',
-        floating=(0.001, 1000.0))).value
-    step_size = d('step_size', 0.01, descriptor(
-        'plant step h, s (RK4); the control period must be a multiple of it',
-        read_only=True, floating=(1e-5, 1.0))).value
-    scenario_name = d('scenario', '', descriptor(
-        'scenario name (config/scenarios/<name>.yaml) or path: initial state, '
-        'disturbances and robot overrides; empty: at rest at the origin, no disturbance',
-        read_only=True)).value
-    # Declared without a default: unset means "the scenario's value".
-    com_error = d('com_error', Parameter.Type.DOUBLE_ARRAY, descriptor(
-        "true center of gravity minus the nominal one, base_link_frd, m (the paper's "
-        'disturbance); overrides the scenario; unset: the scenario\'s (or zero)',
-        read_only=True, constraints='3 finite numbers')).value
-    current = d('current', Parameter.Type.DOUBLE_ARRAY, descriptor(
-        "mean ocean current in odom_ned, m/s; overrides the scenario's; unset: the "
-        "scenario's (or zero)", read_only=True, constraints='3 finite numbers')).value
-    duration = d('duration', 0.0, descriptor(
-        'sim time at which the run ends, s (a whole number of steps); 0: never',
-        read_only=True, floating=(0.0, 1e9))).value
-    exit_at_end = d('exit_at_end', False, descriptor(
-        'exit the process (code 0) when duration is reached', read_only=True)).value
-    stall_timeout = d('stall_timeout', 1.0, descriptor(
-        'lockstep: wall seconds without the commands of a tick before a stall is '
-        'reported and the tick\'s state published again', floating=(0.01, 3600.0))).value
-    startup_subscribers = d('startup_subscribers', 1, descriptor(
-        'odom readers to wait for before publishing the initial state (realtime: before '
-        'time starts); 0: start at once', read_only=True, integer=(0, 1000))).value
-    startup_delay = d('startup_delay', 0.0, descriptor(
-        'wall seconds to wait once the readers are there, so that every other '
-        'pair of endpoints (e.g. a bag recorder and the allocator) is matched too',
-        read_only=True, floating=(0.0, 60.0))).value
-    command_timeout = d('command_timeout', 0.5, descriptor(
-        'realtime: sim seconds without a thrust_cmd after which the thrusters are '
-        'commanded to zero (tilts held) until commands return; 0: off',
-        floating=(0.0, 3600.0))).value
-    failed = declare_failed_thrusters(node)
-    node.declare_stamp_bounds()
-    robot, period = declare_robot(node)
-    node.check_overrides()
-
-    if mode not in MODES:
-        raise ParameterError('mode', f'got {mode!r}; allowed: {", ".join(MODES)}')
-    scenario: Scenario | None = load_scenario(scenario_name) if scenario_name else None
-    disturbances = scenario.disturbances if scenario is not None else Disturbances()
-    if com_error is not None:
-        disturbances = replace(disturbances, com_error=tuple(com_error))
-    if current is not None:
-        disturbances = replace(disturbances, current=tuple(current))
-    step_ns = to_ns(step_size)
-    period_ns = to_ns(period)
-    if period_ns % step_ns:
-        raise ParameterError('control_period', f'got {period!r} s; allowed: a whole '
-                             f'multiple of step_size ({step_size!r} s)')
-    duration_ns = to_ns(duration)
-    if duration_ns % step_ns:
-        raise ParameterError('duration', f'got {duration!r} s; allowed: 0 or a whole '
-                             f'number of steps ({step_size!r} s)')
-    return PlantConfig(
-        mode=mode, real_time_factor=float(rtf), step_ns=step_ns, control_period_ns=period_ns,
-        robot=scenario.robot(robot) if scenario is not None else robot,
-        disturbances=disturbances,
-        initial_state=scenario.initial_state if scenario is not None else InitialState(),
-        scenario=scenario_name, duration_ns=duration_ns, exit_at_end=bool(exit_at_end),
-        stall_timeout=float(stall_timeout), startup_subscribers=int(startup_subscribers),
-        startup_delay=float(startup_delay), command_timeout=float(command_timeout),
-        failed_thrusters=failed, faults=scenario.faults if scenario is not None else ())
 
 
 class PlantSimulator(TiltrovNode):

@@ -36,6 +36,7 @@ from tiltrov_ros.core.names import (
     SETPOINT,
     SETPOINT_VELOCITY,
 )
+from tiltrov_ros.core.paramtable import Param, ParamTable
 from tiltrov_ros.core.scenarios import ReferenceProfile, load_scenario
 from tiltrov_ros.core.timebase import format_ns, seconds, to_ns
 from tiltrov_ros.core.validation import checked_stamp_ns
@@ -43,9 +44,18 @@ from tiltrov_ros.core.validation import checked_stamp_ns
 from .base import OK, THROTTLE, WARN, TiltrovNode, guarded, input_callback
 from .conversions import fill_pose, fill_twist, stamp_ns
 from .executors import main_loop
-from .parameters import Overrides, declare_robot, descriptor
+from .parameters import Overrides, check, declare, declare_robot
 from .qos import CLOCK_READER_QOS, PUBLISHER_QOS
 
+#: The reference publisher's own parameters (besides the robot and wait_for_recorder).
+REFERENCE_PARAMS = ParamTable('reference_publisher', [
+    Param('scenario', 'str', '', 'scenario name (config/scenarios/<name>.yaml) or path whose '
+          'reference is played; empty: hold the origin (eta_d = 0)', read_only=True),
+    Param('duration', 'float', 0.0, 'publish ticks before this sim time only; 0: no end', 's',
+          low=0.0, high=1e9, read_only=True),
+    Param('max_catch_up', 'int', 100, 'most ticks published for one /clock message (the '
+          'latest ones)', low=1, high=1_000_000),
+])
 #: eta_d = 0 for ever: the reference without a scenario.
 HOLD_ORIGIN = ReferenceProfile(((),) * 6)
 
@@ -58,20 +68,14 @@ class ReferencePublisher(TiltrovNode):
                  parameter_overrides: Overrides = None) -> None:
         super().__init__(node_name, namespace=namespace, context=context, cli_args=cli_args,
                          parameter_overrides=parameter_overrides)
-        d = self.declare_parameter
-        self.scenario = d('scenario', '', descriptor(
-            'scenario name (config/scenarios/<name>.yaml) or path whose reference is '
-            'played; empty: hold the origin (eta_d = 0)', read_only=True)).value
-        duration = d('duration', 0.0, descriptor(
-            'publish ticks before this sim time only, s; 0: no end', read_only=True,
-            floating=(0.0, 1e9))).value
-        self.max_catch_up = d('max_catch_up', 100, descriptor(
-            'most ticks published for one /clock message (the latest ones)',
-            integer=(1, 1_000_000))).value
+        own = declare(self, REFERENCE_PARAMS)
         _, period = declare_robot(self)
         self.check_overrides()
+        own = check(REFERENCE_PARAMS, own)
+        self.scenario = own['scenario']
+        self.max_catch_up = own['max_catch_up']
         self.period_ns = to_ns(period)
-        self.duration_ns = to_ns(duration)
+        self.duration_ns = to_ns(own['duration'])
         self.profile = (load_scenario(self.scenario).reference if self.scenario
                         else HOLD_ORIGIN)
         self.sim_time = bool(self.get_parameter('use_sim_time').value)

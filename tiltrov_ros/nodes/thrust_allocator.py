@@ -27,7 +27,7 @@ from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 import math
 import sys
 from typing import Any
@@ -46,6 +46,7 @@ from tiltrov_ros.core.allocation import (
 from tiltrov_ros.core.errors import ParameterError
 from tiltrov_ros.core.names import (
     ALLOCATOR,
+    ALLOCATOR_MODES,
     FRAME_BODY,
     THRUST_CMD,
     THRUSTERS,
@@ -56,6 +57,7 @@ from tiltrov_ros.core.names import (
     WRENCH_CMD,
     WRENCH_DOFS,
 )
+from tiltrov_ros.core.paramtable import SHIPPED, Param, ParamTable
 from tiltrov_ros.core.scenarios import ThrusterFault, failed_at, load_scenario
 from tiltrov_ros.core.timebase import format_ns, seconds, to_ns
 from tiltrov_ros.core.validation import (
@@ -79,7 +81,7 @@ from .conversions import (
     wrench_array,
 )
 from .executors import main_loop
-from .parameters import Overrides, declare_failed_thrusters, declare_robot, descriptor
+from .parameters import Overrides, check, declare, declare_failed_thrusters, declare_robot
 from .qos import PUBLISHER_QOS, RELIABLE_QOS
 from .watchdog import InputWatchdog
 
@@ -87,7 +89,35 @@ TILT_REQUEST_MODES = ('auto', 'required', 'ignored')
 #: s (wall): how often a wrench waiting for its tilt request is looked at.
 WATCHDOG_PERIOD = 0.1
 BUFFER = 200
-ALLOCATOR_KEYS = ('mode', 'max_tilt_step', 'weights')
+
+#: The allocator's own configuration (the ``thrust_allocator`` section that ``tiltrov
+#: sim`` reads too; defaults: the shipped file's): declared and documented from here,
+#: validated by :meth:`~tiltrov_ros.core.allocation.AllocatorConfig.from_mapping`.
+ALLOCATION = ParamTable('allocation', [
+    Param('mode', 'str', SHIPPED, 'robust: exact when attainable, else least weighted wrench '
+          'error; paper: Section 3 of the paper', choices=ALLOCATOR_MODES),
+    Param('max_tilt_step', 'float', SHIPPED, 'how far each tilt may move per control period; '
+          '<= 0: the servo reach (tilt_rate_limit x control_period)', 'rad', low=-1e6,
+          high=1e6),
+    Param('weights', 'floats', SHIPPED, 'robust mode: weights of the wrench error', 'per '
+          'component X Y Z K M N', size=6, low=0.0, low_open=True),
+])
+#: The node's own parameters (besides the allocator's, failed_thrusters, the stamp
+#: bounds and the robot).
+ALLOCATOR_PARAMS = ParamTable('thrust_allocator', [
+    Param('tilt_request', 'str', 'auto', 'tilts fixed by the controller (switching baseline): '
+          'required, ignored, or auto (required once a tilt_request publisher or message is '
+          'seen)', choices=TILT_REQUEST_MODES, read_only=True),
+    Param('input_timeout', 'float', 1.0, 'wall seconds a wrench waits for its tilt_request '
+          'before the latest one is used', 's', low=0.001, high=3600.0),
+    Param('wrench_timeout', 'float', 0.5, 'zero thrust (tilts held) is published every '
+          'control period while the newest valid wrench_cmd is older than this; on sim time '
+          'measured on /clock, else wall time since the message arrived; 0: off', 's',
+          low=0.0, high=3600.0),
+    Param('scenario', 'str', '', 'scenario name or path whose faults (thruster failures) the '
+          'allocator is told of at their time + detected_after, by the wrench stamps; empty: '
+          'none', read_only=True),
+])
 
 
 def thruster_names(indices: Sequence[int]) -> str:
@@ -170,51 +200,32 @@ class ThrustAllocatorNode(TiltrovNode):
 
     def _declare_parameters(self) -> None:
         shipped = load_allocator_config()
-        d = self.declare_parameter
-        d('mode', shipped.mode, descriptor(
-            "robust: exact when attainable, else least weighted wrench error; paper: "
-            'Section 3 of the paper', constraints='robust or paper'))
-        d('max_tilt_step', shipped.max_tilt_step, descriptor(
-            'how far each tilt may move per control period, rad; <= 0: the servo reach '
-            '(tilt_rate_limit x control_period)', floating=(-1e6, 1e6)))
-        d('weights', [float(w) for w in shipped.weights], descriptor(
-            'robust mode: weights of the wrench error (X Y Z K M N)',
-            constraints='6 finite numbers > 0'))
-        self.tilt_request_mode = d('tilt_request', 'auto', descriptor(
-            'tilts fixed by the controller (switching baseline): required, ignored, or '
-            'auto (required once a tilt_request publisher or message is seen)',
-            read_only=True, constraints=' | '.join(TILT_REQUEST_MODES))).value
-        self.input_timeout = d('input_timeout', 1.0, descriptor(
-            'wall seconds a wrench waits for its tilt_request before the latest one is '
-            'used', floating=(0.001, 3600.0))).value
-        self.wrench_timeout = self.declare_timeout(
-            'wrench_timeout', 0.5, 'zero thrust (tilts held) is published every control '
-            'period while the newest valid wrench_cmd is older than this')
+        declare(self, ALLOCATION, defaults=asdict(shipped))
+        own = declare(self, ALLOCATOR_PARAMS, only=('tilt_request', 'input_timeout',
+                                                  'wrench_timeout'))
         self.failed_param = declare_failed_thrusters(self)
-        scenario = d('scenario', '', descriptor(
-            'scenario name or path whose faults (thruster failures) the allocator is told '
-            'of at their time + detected_after, by the wrench stamps; empty: none',
-            read_only=True)).value
+        own.update(declare(self, ALLOCATOR_PARAMS, only=('scenario',)))
         self.scenario_faults: tuple[ThrusterFault, ...] = (
-            load_scenario(scenario).faults if scenario else ())
+            load_scenario(own['scenario']).faults if own['scenario'] else ())
         self.declare_stamp_bounds()
         self.robot, self.control_period = declare_robot(self)
         self.check_overrides()
-        if self.tilt_request_mode not in TILT_REQUEST_MODES:
-            raise ParameterError('tilt_request', f'got {self.tilt_request_mode!r}; allowed: '
-                                 f'{", ".join(TILT_REQUEST_MODES)}')
+        own = check(ALLOCATOR_PARAMS, own)
+        self.tilt_request_mode = own['tilt_request']
+        self.input_timeout = own['input_timeout']
+        self.wrench_timeout = own['wrench_timeout']
         self.allocator_config = AllocatorConfig.from_mapping(
-            {key: self.get_parameter(key).value for key in ALLOCATOR_KEYS})
+            {key: self.get_parameter(key).value for key in ALLOCATION.names})
 
     def _validate_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
         verdict = self.check_failed_thrusters(parameters)
         if not verdict.successful:
             return verdict
-        changes = {p.name: p.value for p in parameters if p.name in ALLOCATOR_KEYS}
+        changes = {p.name: p.value for p in parameters if p.name in ALLOCATION.names}
         if not changes:
             return SetParametersResult(successful=True)
         values = {key: changes.get(key, self.get_parameter(key).value)
-                  for key in ALLOCATOR_KEYS}
+                  for key in ALLOCATION.names}
         try:
             AllocatorConfig.from_mapping(values)
         except ParameterError as exc:
@@ -229,10 +240,10 @@ class ThrustAllocatorNode(TiltrovNode):
                 self.failed_param = failed_thruster_indices(p.value)
                 self._use_failed(self._wanted_failed(self._last_ns if self._last_ns >= 0
                                                      else None), 'failed_thrusters set')
-        if not any(p.name in ALLOCATOR_KEYS for p in parameters):
+        if not any(p.name in ALLOCATION.names for p in parameters):
             return
         self.allocator_config = AllocatorConfig.from_mapping(
-            {key: self.get_parameter(key).value for key in ALLOCATOR_KEYS})
+            {key: self.get_parameter(key).value for key in ALLOCATION.names})
         self.allocator = self.allocator_config.build(self.robot, self.control_period,
                                                      self.failed)
         self.get_logger().info(f'allocator changed: {self.allocator_config}')

@@ -26,7 +26,7 @@ controller.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 import sys
 from typing import Any
 
@@ -39,7 +39,9 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 
 from tiltrov_ros.core.controllers import (
-    CONTROLLER_KINDS,
+    CONTROL_LAW,
+    GAINS,
+    SWITCHING,
     ControllerConfig,
     ControlOutput,
     Reference,
@@ -62,6 +64,7 @@ from tiltrov_ros.core.names import (
     TILTS,
     WRENCH_CMD,
 )
+from tiltrov_ros.core.paramtable import Param, ParamTable
 from tiltrov_ros.core.timebase import cdr_stamp_ns, format_ns, seconds, to_ns
 from tiltrov_ros.core.validation import (
     InvalidInput,
@@ -83,7 +86,7 @@ from .conversions import (
     twist_array,
 )
 from .executors import main_loop
-from .parameters import Overrides, declare_robot, descriptor
+from .parameters import Overrides, check, declare, declare_robot
 from .qos import PUBLISHER_QOS, RELIABLE_QOS, reader_qos
 from .watchdog import InputWatchdog
 
@@ -91,24 +94,21 @@ from .watchdog import InputWatchdog
 WATCHDOG_PERIOD = 0.1
 #: Buffered setpoints (by stamp); older ones are dropped.
 BUFFER = 200
-GAIN_KEYS = ('kp', 'kd', 'ki', 'integral_limit')
-SWITCHING_KEYS = ('hysteresis', 'dwell_time', 'position_scale', 'angle_scale', 'deadband',
-                  'settle_time')
-_GAIN_DOC = {
-    'kp': 'proportional gains (x y z roll pitch yaw), N/m and N m/rad',
-    'kd': 'derivative gains, N s/m and N m s/rad',
-    'ki': 'pid only: integral gains, N/(m s) and N m/(rad s)',
-    'integral_limit': 'pid only: bound on |ki * integral(e)| per DOF, N and N m (anti-windup)',
-}
-_SWITCHING_DOC = {
-    'hysteresis': "switch when the other group's error exceeds (1 + hysteresis) x the "
-                  "current group's (>= 0)",
-    'dwell_time': 'least time between two switches, s (>= 0)',
-    'position_scale': 'normalises position errors, m (> 0)',
-    'angle_scale': 'normalises angle errors, rad (> 0)',
-    'deadband': 'normalised error under which no switch happens (>= 0)',
-    'settle_time': 'added to the servo travel before thrust resumes, s (>= 0)',
-}
+#: The controller node's own parameters (besides the controller's: controller, gains.*,
+#: switching.*; and the stamp bounds and the robot).
+CONTROLLER_PARAMS = ParamTable('wrench_controller', [
+    Param('mode', 'str', REALTIME, 'lockstep: wait for the setpoint stamped with each tick '
+          '(deterministic); realtime: use the latest setpoint', choices=MODES, read_only=True),
+    Param('use_setpoint_velocity', 'bool', True, 'use setpoint_velocity as the feed-forward '
+          'd(eta_d)/dt (false: zero)', read_only=True),
+    Param('input_timeout', 'float', 1.0, 'lockstep: wall seconds to wait for the '
+          'setpoint_velocity of a tick before reading it as zero', 's', low=0.001,
+          high=3600.0),
+    Param('odom_timeout', 'float', 0.5, 'realtime: a zero wrench is published (every control '
+          'period) while the newest valid odom is older than this; on sim time measured on '
+          '/clock, else wall time since the message arrived; 0: off', 's', low=0.0,
+          high=3600.0),
+])
 
 
 @dataclass
@@ -126,8 +126,8 @@ def _config_mapping(get: Any) -> dict[str, Any]:
     """The ``wrench_controller`` parameters as ControllerConfig.from_mapping wants them."""
     return {
         'controller': get('controller'),
-        'gains': {key: list(get(f'gains.{key}')) for key in GAIN_KEYS},
-        'switching': {key: get(f'switching.{key}') for key in SWITCHING_KEYS},
+        'gains': {key: list(get(GAINS.full_name(key))) for key in GAINS.names},
+        'switching': {key: get(SWITCHING.full_name(key)) for key in SWITCHING.names},
     }
 
 
@@ -204,35 +204,18 @@ class WrenchController(TiltrovNode):
 
     def _declare_parameters(self) -> None:
         shipped = load_controller_config()
-        d = self.declare_parameter
-        d('controller', shipped.kind, descriptor(
-            'control law: pd (eq. 16), switching (baseline: tilts 0 or 90 deg, with '
-            'tilt_request), pid (pd + g(eta) + clamped integral)', read_only=True,
-            constraints=' | '.join(CONTROLLER_KINDS)))
-        self.mode = d('mode', REALTIME, descriptor(
-            'lockstep: wait for the setpoint stamped with each tick (deterministic); '
-            'realtime: use the latest setpoint', read_only=True,
-            constraints='lockstep or realtime')).value
-        self.use_velocity = bool(d('use_setpoint_velocity', True, descriptor(
-            'use setpoint_velocity as the feed-forward d(eta_d)/dt (false: zero)',
-            read_only=True)).value)
-        self.input_timeout = d('input_timeout', 1.0, descriptor(
-            'lockstep: wall seconds to wait for the setpoint_velocity of a tick before '
-            'reading it as zero', floating=(0.001, 3600.0))).value
-        self.odom_timeout = self.declare_timeout(
-            'odom_timeout', 0.5, 'realtime: a zero wrench is published (every control '
-            'period) while the newest valid odom is older than this')
+        declare(self, CONTROL_LAW, defaults={'controller': shipped.kind})
+        own = declare(self, CONTROLLER_PARAMS)
         self.declare_stamp_bounds()
-        for key in GAIN_KEYS:
-            d(f'gains.{key}', [float(v) for v in getattr(shipped.gains, key)], descriptor(
-                _GAIN_DOC[key], constraints='6 finite numbers >= 0 (x y z roll pitch yaw)'))
-        for key in SWITCHING_KEYS:
-            d(f'switching.{key}', float(getattr(shipped.switching, key)), descriptor(
-                'switching only: ' + _SWITCHING_DOC[key], floating=(0.0, 1e6)))
+        declare(self, GAINS, defaults=asdict(shipped.gains))
+        declare(self, SWITCHING, defaults=asdict(shipped.switching))
         self.robot, self.control_period = declare_robot(self)
         self.check_overrides()
-        if self.mode not in MODES:
-            raise ParameterError('mode', f'got {self.mode!r}; allowed: {", ".join(MODES)}')
+        own = check(CONTROLLER_PARAMS, own)
+        self.mode = own['mode']
+        self.use_velocity = own['use_setpoint_velocity']
+        self.input_timeout = own['input_timeout']
+        self.odom_timeout = own['odom_timeout']
         self.controller_config = ControllerConfig.from_mapping(
             _config_mapping(lambda name: self.get_parameter(name).value))
 

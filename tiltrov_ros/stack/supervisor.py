@@ -114,7 +114,6 @@ class NodeSpec:
     params_files: tuple[Path, ...] = ()
     overrides: Mapping[str, Any] = field(default_factory=dict)
     raw_params: tuple[str, ...] = ()       # 'name:=value' strings from --param
-    overrides_kwarg: str = 'parameter_overrides'
 
     def all_overrides(self) -> dict[str, Any]:
         """``overrides`` plus the ``--param`` values (parsed as YAML, as ``-p`` does)."""
@@ -249,15 +248,13 @@ def recorder_spec(options: LaunchOptions, config: StackConfig, duration: float,
                   raw: Sequence[str] = ()) -> NodeSpec:
     """The ``bag_recorder`` node recording every topic into ``--record DIR``.
 
-    The recorder takes its parameters as ``params=`` in process and as ``-p`` on
-    its command line; it runs on sim time so the bag's log times are the stack's.
+    It runs on sim time so the bag's log times are the stack's.
     """
     assert options.record is not None
     overrides = {'output': str(Path(options.record).resolve()),
                  'run_info': json.dumps(run_info(options, config, duration), sort_keys=True),
                  'use_sim_time': True}
-    return NodeSpec(RECORDER, RECORDER_MODULE, 'BagRecorder', (), overrides, tuple(raw),
-                    overrides_kwarg='params')
+    return NodeSpec(RECORDER, RECORDER_MODULE, 'BagRecorder', (), overrides, tuple(raw))
 
 
 def namespaced_config(specs: Iterable[NodeSpec], namespace: str, directory: Path) -> None:
@@ -289,7 +286,7 @@ def build_node(spec: NodeSpec, context: Any, namespace: str = '') -> Any:
     for path in spec.params_files:
         cli_args += ['--params-file', str(path)]
     kwargs = {'context': context, 'cli_args': cli_args,
-              spec.overrides_kwarg: spec.all_overrides()}
+              'parameter_overrides': spec.all_overrides()}
     if namespace:
         kwargs['namespace'] = namespace
     return cls(**kwargs)
