@@ -21,7 +21,8 @@ from sensor_msgs.msg import JointState
 from tiltrov_ros.core import names
 from tiltrov_ros.core.names import PLANT
 from tiltrov_ros.nodes.conversions import stamp_ns
-from tiltrov_ros.stack import supervisor as launcher
+from tiltrov_ros.stack.inprocess import build_nodes
+from tiltrov_ros.stack.specs import LaunchOptions, NodeSpec, stack_specs
 
 NS = 1_000_000_000
 MS = 1_000_000
@@ -155,7 +156,7 @@ class StackRun:
 
     nodes: list[Any]
     probe: Probe
-    specs: list[launcher.NodeSpec]
+    specs: list[NodeSpec]
     config: Any
     duration: float
     extra: dict[str, Any] = field(default_factory=dict)
@@ -168,7 +169,7 @@ class StackRun:
 STACK_TOPICS = tuple(t for t in names.STACK_TOPICS if t != names.DIAGNOSTICS)
 
 
-def run_stack(context: Any, executor: Any, options: launcher.LaunchOptions, *,
+def run_stack(context: Any, executor: Any, options: LaunchOptions, *,
               topics: Sequence[str] = STACK_TOPICS, timeout: float = 60.0,
               namespace: str = '') -> StackRun:
     """Build the launcher's nodes in ``context``, spin ``executor`` until the plant ends.
@@ -178,11 +179,11 @@ def run_stack(context: Any, executor: Any, options: launcher.LaunchOptions, *,
     """
     import rclpy
 
-    specs, config, duration = launcher.stack_specs(options, extra_odom_readers=1)
+    specs, config, duration = stack_specs(options, extra_odom_readers=1)
     probe_node = rclpy.create_node('stack_probe', context=context,
                                    namespace=namespace or None)
     probe = Probe(probe_node, topics)
-    nodes = launcher.build_nodes(specs, context, namespace)
+    nodes = build_nodes(specs, context, namespace)
     run = StackRun(nodes, probe, specs, config, duration)
     try:
         for node in (probe_node, *nodes):

@@ -28,8 +28,8 @@ from tiltrov_ros.bag.reader import read_runlog
 from tiltrov_ros.core.metrics import metric_differences
 from tiltrov_ros.core.names import ALLOCATOR
 from tiltrov_ros.core.timebase import to_ns
-from tiltrov_ros.stack import supervisor as launcher
-from tiltrov_ros.stack.supervisor import LaunchOptions
+from tiltrov_ros.stack.specs import LaunchOptions, stack_specs
+from tiltrov_ros.stack.supervisor import executable
 
 SCENARIO = 'pitch_hold'
 DURATION = '5'          # s of sim time: 501 plant steps, 100 control ticks
@@ -105,10 +105,10 @@ def test_replayed_wrench_cmd_drives_the_allocator_like_the_live_stack(
     assert sorted(set(replayed)) == [int(ns) for ns in control.stamps]
     probe_node = ros.node('replay_probe')
     probe = Probe(probe_node, ['thrust_cmd', 'tilt_cmd', 'wrench_achieved'])
-    specs, _, _ = launcher.stack_specs(LaunchOptions(scenario=SCENARIO, controller='pd',
+    specs, _, _ = stack_specs(LaunchOptions(scenario=SCENARIO, controller='pd',
                                                      duration=float(DURATION)))
     spec = next(s for s in specs if s.name == ALLOCATOR)
-    allocator = subprocess.Popen(launcher.executable(spec)
+    allocator = subprocess.Popen(executable(spec)
                                  + spec.ros_args(spec.write_overrides(tmp_path)),
                                  stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     player = None

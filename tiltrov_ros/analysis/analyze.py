@@ -28,19 +28,14 @@ with one line on stderr and exit code 2.
 
 from __future__ import annotations
 
-import argparse
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-import sys
 from typing import Any
 
 from tiltrov_ros.analysis.runs import (
     InputError,
     one_line,
-    print_written,
-    report_errors,
-    summary_line,
     write_run,
 )
 from tiltrov_ros.core.errors import BagError, TiltrovError
@@ -210,40 +205,3 @@ def analyze(bags: Sequence[str | Path], out: Path, *, namespace: str | None = No
         result.written += write_figures([r.log for r in recordings], out,
                                         labels=run_labels(recordings), dpi=dpi)
     return result
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument('bags', nargs='+', metavar='BAG',
-                        help='bag directories (or their .mcap files); several are overlaid')
-    parser.add_argument('--out', type=Path, default=Path('runs/analyze'), metavar='DIR',
-                        help='output directory (default: runs/analyze)')
-    parser.add_argument('--namespace', default=None, metavar='NS',
-                        help="the stack's namespace in the bags (default: the namespace of "
-                             "the bag's one odom topic)")
-    parser.add_argument('--no-figures', action='store_true', help='skip the PNG figures')
-    parser.add_argument('--dpi', type=int, default=100, help='figure resolution (default 100)')
-
-
-def run(args: argparse.Namespace) -> int:
-    def task() -> int:
-        result = analyze(args.bags, args.out, namespace=args.namespace,
-                         figures=not args.no_figures, dpi=args.dpi)
-        for note in result.notes:
-            print(f'tiltrov analyze: note: {note}', file=sys.stderr)
-        for name, values in result.metrics.items():
-            print(summary_line(values, label=name))
-        print_written(result.written, args.out)
-        return 0
-
-    return report_errors('tiltrov analyze', task)
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """Run as ``python -m tiltrov_ros.analysis.analyze`` (same as ``tiltrov analyze``)."""
-    parser = argparse.ArgumentParser(prog='tiltrov analyze')
-    add_arguments(parser)
-    return run(parser.parse_args(argv))
-
-
-if __name__ == '__main__':
-    sys.exit(main())

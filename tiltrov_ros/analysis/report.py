@@ -18,21 +18,17 @@
 
 from __future__ import annotations
 
-import argparse
 from collections.abc import Mapping, Sequence
-import json
 import math
 import os
 from pathlib import Path
-import sys
 from typing import Any
 
-from tiltrov_ros.analysis.runs import InputError, one_line, resolve, simulate
+from tiltrov_ros.analysis.runs import InputError, resolve, simulate
 from tiltrov_ros.core.controllers import ControllerConfig
 from tiltrov_ros.core.metrics import (
     FINAL_WINDOW,
     OSCILLATION_WINDOW,
-    compute_metrics,
 )
 from tiltrov_ros.core.names import DOF_NAMES
 from tiltrov_ros.core.runlog import RunLog
@@ -54,19 +50,6 @@ FIGURES: dict[str, tuple[str, ...]] = {
 }
 WRENCH_FIGURES = (('pitch_hold', 'pd'),)
 _DEG = 180.0 / math.pi
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument('--readme', type=Path, metavar='FILE',
-                        help='README to update between the results markers (default: only '
-                             'print the section)')
-    parser.add_argument('--out', type=Path, metavar='DIR',
-                        help='figure directory (default: docs/figures next to the README, '
-                             'or ./docs/figures)')
-    parser.add_argument('--dpi', type=int, default=80, help='figure resolution (default 80)')
-    parser.add_argument('--duration', type=float, metavar='SEC',
-                        help='shorten every run to SEC (for trying the command; the README '
-                             'numbers are for the full scenarios)')
 
 
 # --------------------------------------------------------------------------- formatting
@@ -263,7 +246,7 @@ def update_readme(text: str, section: str) -> str:
 # --------------------------------------------------------------------------- the command
 
 
-def _runs(duration: float | None) -> list[tuple[StackConfig, RunLog]]:
+def run_scenarios(duration: float | None = None) -> list[tuple[StackConfig, RunLog]]:
     out = []
     for scenario, kinds in RUNS:
         for kind in kinds:
@@ -272,7 +255,7 @@ def _runs(duration: float | None) -> list[tuple[StackConfig, RunLog]]:
     return out
 
 
-def _figures(runs: list[tuple[StackConfig, RunLog]], out: Path, dpi: int) -> list[Path]:
+def write_report_figures(runs: list[tuple[StackConfig, RunLog]], out: Path, dpi: int) -> list[Path]:
     from tiltrov_ros.analysis.figures import write_figures
     written: list[Path] = []
     for scenario, _ in RUNS:
@@ -286,38 +269,5 @@ def _figures(runs: list[tuple[StackConfig, RunLog]], out: Path, dpi: int) -> lis
     return written
 
 
-def _relative(path: Path, start: Path) -> str:
+def relative(path: Path, start: Path) -> str:
     return Path(os.path.relpath(path.resolve(), start.resolve())).as_posix()
-
-
-def run(args: argparse.Namespace) -> int:
-    readme: Path | None = args.readme
-    out: Path = args.out or ((readme.parent if readme else Path('.')) / 'docs' / 'figures')
-    try:
-        if readme is not None and not readme.is_file():
-            raise InputError(f'no README at {readme}')
-        runs = _runs(args.duration)
-        results = [(config, compute_metrics(log)) for config, log in runs]
-        out.mkdir(parents=True, exist_ok=True)
-        figures = _figures(runs, out, args.dpi)
-        table = {f'{c.scenario.name}/{c.controller.kind}': m for c, m in results}
-        (out / 'results.json').write_text(json.dumps(table, indent=1, allow_nan=False) + '\n',
-                                          encoding='utf-8')
-        base = readme.parent if readme else Path('.')
-        section = build_section(results, [_relative(f, base) for f in figures],
-                                duration=args.duration)
-        if readme is None:
-            print(section)
-        else:
-            readme.write_text(update_readme(readme.read_text(encoding='utf-8'), section),
-                              encoding='utf-8')
-            print(f'updated {readme} ({len(results)} runs, {len(figures)} figures in {out})')
-        for line in acceptance(results):
-            print(line.replace('**', ''))
-    except InputError as exc:
-        print(f'tiltrov report: error: {exc}', file=sys.stderr)
-        return 2
-    except OSError as exc:
-        print(f'tiltrov report: error: {one_line(exc)}', file=sys.stderr)
-        return 1
-    return 0

@@ -19,23 +19,23 @@ class Command(NamedTuple):
     help: str
 
 
-# name -> implementing module (relative to this package) and one-line help.
+# name -> implementing module (in this package, named as the command) and one-line help.
 COMMANDS: dict[str, Command] = {
     'demo': Command('.demo', "run the full stack on the paper's positioning scenario "
                              '(bag, figures, metrics)'),
+    'launch': Command('.launch', 'start the ROS stack (plant, controller, allocator, '
+                                 'reference) for a scenario, lockstep or realtime'),
+    'sim': Command('.sim', 'run a scenario headless (no ROS): time series, metrics.json, '
+                           'figures'),
+    'analyze': Command('.analyze', 'metrics.json and figures of recorded runs (bags)'),
+    'replay': Command('.replay', 'publish a recorded bag into a live graph'),
+    'bag': Command('.bag', 'look into a bag (info) or repair one whose recorder was killed'),
+    'report': Command('.report', "run the paper's scenarios with every controller; results "
+                                 'page and figures'),
     'bench': Command('.bench', 'run the benchmarks of a source checkout (speed ratios '
                                'against baselines measured in the same run)'),
-    'bag': Command('.bag', 'look into a bag (info) or repair one whose recorder was killed'),
-    'replay': Command('..bag.replay', 'publish a recorded bag into a live graph'),
-    'sim': Command('..analysis.runs', 'run a scenario headless (no ROS): time series, '
-                                      'metrics.json, figures'),
-    'report': Command('..analysis.report', "run the paper's scenarios with every controller; "
-                                           'results table and figures into README.md'),
-    'analyze': Command('..analysis.analyze', 'metrics.json and figures of recorded runs (bags)'),
     'soak': Command('.soak', 'one hour of simulated time in lockstep, recorded: RSS of each '
                              'process, messages published vs recorded, stalls'),
-    'launch': Command('..stack.supervisor', 'start the ROS stack (plant, controller, allocator, '
-                                   'reference) for a scenario, lockstep or realtime'),
 }
 
 

@@ -84,7 +84,8 @@ def _say(text: str) -> None:
 
 def record_run(controller: str, args: argparse.Namespace, bag: Path, log_path: Path) -> int:
     """One recorded lockstep launch; the launcher's exit code."""
-    from tiltrov_ros.stack.supervisor import LaunchOptions, launch
+    from tiltrov_ros.stack.launch import launch
+    from tiltrov_ros.stack.specs import LaunchOptions
 
     options = LaunchOptions(scenario=args.scenario, controller=controller,
                             duration=args.duration, record=bag,

@@ -31,7 +31,9 @@ from typing import Any
 
 from tiltrov_ros.core.controllers import CONTROLLER_KINDS
 from tiltrov_ros.core.names import CLOCK, DIAGNOSTICS, PLANT, STACK_TOPICS
-from tiltrov_ros.stack import supervisor as launcher
+from tiltrov_ros.stack.launch import launch
+from tiltrov_ros.stack.specs import LaunchOptions
+from tiltrov_ros.stack.supervisor import EXIT_FAILED, EXIT_OK, EXIT_USAGE, Monitor
 
 #: s (wall) the other nodes keep running after the plant's end: one more
 #: /diagnostics round (every 1 s) carries their final counts to the recorder.
@@ -50,7 +52,7 @@ def rss_kib(pid: int) -> int | None:
     return None
 
 
-class RssMonitor(launcher.Monitor):
+class RssMonitor(Monitor):
     """Samples each node's RSS (see the module docstring)."""
 
     def __init__(self, period: float, warmup: float) -> None:
@@ -155,19 +157,19 @@ def run(args: argparse.Namespace) -> int:
     bag = out / 'bag'
     if bag.exists():
         print(f'tiltrov soak: {bag} exists; choose another --out', file=sys.stderr)
-        return launcher.EXIT_USAGE
+        return EXIT_USAGE
     out.mkdir(parents=True, exist_ok=True)
-    options = launcher.LaunchOptions(scenario=args.scenario, controller=args.controller,
+    options = LaunchOptions(scenario=args.scenario, controller=args.controller,
                                      duration=args.duration, lockstep=True, record=bag)
     monitor = RssMonitor(args.sample_period, args.warmup)
     started = time.monotonic()
-    code = launcher.launch(options, monitor=monitor, linger=LINGER)
+    code = launch(options, monitor=monitor, linger=LINGER)
     wall = time.monotonic() - started
-    if code == launcher.EXIT_USAGE:
+    if code == EXIT_USAGE:
         return code
     if not bag.exists():
         print('tiltrov soak: no bag was written', file=sys.stderr)
-        return launcher.EXIT_FAILED
+        return EXIT_FAILED
     diagnostics, rtf = final_diagnostics(bag)
     counts = message_counts(bag, diagnostics)
     plant = diagnostics.get(PLANT, {})
@@ -196,5 +198,5 @@ def run(args: argparse.Namespace) -> int:
         print(f'  real-time factor: first tenth {r["first_tenth"]:.1f}, last tenth '
               f'{r["last_tenth"]:.1f} ({r["samples"]} samples)')
     print(f'  written: {out / "soak.json"}, {bag}')
-    ok = code == launcher.EXIT_OK and not result['lost'] and result['stalls'] == 0
-    return launcher.EXIT_OK if ok else launcher.EXIT_FAILED
+    ok = code == EXIT_OK and not result['lost'] and result['stalls'] == 0
+    return EXIT_OK if ok else EXIT_FAILED

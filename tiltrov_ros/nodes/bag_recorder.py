@@ -38,9 +38,7 @@ import sys
 import time
 from typing import Any
 
-from rcl_interfaces.msg import (
-    SetParametersResult,
-)
+from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.clock import Clock
 from rclpy.clock_type import ClockType

@@ -58,9 +58,7 @@ from tiltrov_ros.core.names import (
     TILT_CMD,
     TILTS,
 )
-from tiltrov_ros.core.scenarios import (
-    failed_at,
-)
+from tiltrov_ros.core.scenarios import failed_at
 from tiltrov_ros.core.timebase import format_ns, seconds, to_ns
 from tiltrov_ros.core.validation import (
     InvalidInput,

@@ -1,0 +1,106 @@
+"""The stack in one process (``tiltrov launch --single-process``, the in-process tests):
+the nodes of :func:`~tiltrov_ros.stack.specs.stack_specs` built in this process,
+with the same parameter files and overrides."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+import importlib
+import threading
+import time
+from typing import Any
+
+from tiltrov_ros.core.names import (
+    PLANT,
+    RECORDER,
+)
+
+from .specs import NodeSpec
+from .supervisor import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, Output
+
+
+def build_node(spec: NodeSpec, context: Any, namespace: str = '') -> Any:
+    """Construct ``spec``'s node class in this process, bound to ``context``."""
+    cls = getattr(importlib.import_module(spec.module), spec.class_name)
+    cli_args = ['--ros-args']
+    for path in spec.params_files:
+        cli_args += ['--params-file', str(path)]
+    kwargs = {'context': context, 'cli_args': cli_args,
+              'parameter_overrides': spec.all_overrides()}
+    if namespace:
+        kwargs['namespace'] = namespace
+    return cls(**kwargs)
+
+
+def build_nodes(specs: Sequence[NodeSpec], context: Any, namespace: str = '') -> list[Any]:
+    """Every node of ``specs`` in this process; destroyed again if one fails."""
+    nodes: list[Any] = []
+    try:
+        for spec in specs:
+            nodes.append(build_node(spec, context, namespace))
+    except BaseException:
+        for node in reversed(nodes):
+            node.destroy_node()
+        raise
+    return nodes
+
+
+def run_single_process(specs: Sequence[NodeSpec], namespace: str, out: Output,
+                       summary: str, executor_kind: str | None = None) -> int:
+    """Every node in this process, bound to one context.
+
+    The stack nodes share one executor (``nodes.executors.make_executor``). The
+    recorder, if any, spins on its own SingleThreadedExecutor in a second
+    thread: it takes queued messages itself inside its callbacks, which the
+    EventsExecutor (one take per event) does not allow, and it stays off the
+    stack's critical path.
+    """
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+
+    from tiltrov_ros.nodes.executors import STARTUP_ERRORS, make_executor, spin_until
+
+    context = Context()
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    nodes: list[Any] = []
+    executor = None
+    side: Any = None
+    side_thread: threading.Thread | None = None
+    started = time.monotonic()
+    try:
+        try:
+            nodes = build_nodes(specs, context, namespace)
+        except STARTUP_ERRORS as exc:
+            out.line('launch', f'cannot start the stack: {exc}')
+            return EXIT_FAILED
+        by_name = {s.name: n for n, s in zip(nodes, specs)}
+        plant = by_name[PLANT]
+        executor = make_executor(context, executor_kind)
+        for name, node in by_name.items():
+            if name != RECORDER:
+                executor.add_node(node)
+        if RECORDER in by_name:
+            side = SingleThreadedExecutor(context=context)
+            side.add_node(by_name[RECORDER])
+            side_thread = threading.Thread(target=side.spin, name=RECORDER, daemon=True)
+            side_thread.start()
+        try:
+            spin_until(executor, context, plant.finished)
+        except KeyboardInterrupt:
+            out.line('launch', 'SIGINT: stopping every node')
+            return EXIT_INTERRUPTED
+        out.line('launch', f'{summary} done in {time.monotonic() - started:.2f} s wall')
+        return EXIT_OK
+    finally:
+        if executor is not None:
+            executor.shutdown()
+        if side is not None:
+            side.shutdown()
+        if side_thread is not None:
+            side_thread.join(timeout=10.0)
+        # The recorder (first in start order) is destroyed last: it drains its queues.
+        for node in reversed(nodes):
+            node.destroy_node()
+        rclpy.try_shutdown(context=context)
