@@ -41,8 +41,9 @@ lint: $(STAMP)
 	$(VENV)/bin/ruff check tiltrov_ros test bench
 	$(VENV)/bin/mypy
 
+# Tests run derandomized (the same Hypothesis examples every run): see test/conftest.py.
 test: lint
-	$(VENV)/bin/pytest
+	TILTROV_HYPOTHESIS_PROFILE=ci $(VENV)/bin/pytest
 
 bench: $(STAMP)
 	$(VENV)/bin/tiltrov bench

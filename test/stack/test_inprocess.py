@@ -19,8 +19,11 @@ def test_single_process_launch_in_a_namespace(ros) -> None:
     root = Probe(ros.node('root_probe'), ['odom'])
     stream = io.StringIO()
     result: list[int] = []
+    # The plant waits for the probe's odom reader too (as for the controller's): a
+    # run of 1 s of sim time takes a fraction of a second, over before a late probe.
     options = LaunchOptions(scenario='pitch_hold', duration=1.0, single_process=True,
-                            namespace='robot1')
+                            namespace='robot1',
+                            params=('plant_simulator:startup_subscribers:=2',))
     thread = threading.Thread(target=lambda: result.append(launch(options, stream)))
     thread.start()
     try:

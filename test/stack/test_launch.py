@@ -3,6 +3,8 @@ respawn."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+import json
 import os
 from pathlib import Path
 import signal
@@ -10,11 +12,13 @@ import subprocess
 import sys
 import threading
 import time
+from typing import Any
 
 import numpy as np
 import pytest
-from ros_stack import MS
+from ros_stack import MS, Probe, diagnostics
 
+from tiltrov_ros.core.names import PLANT
 from tiltrov_ros.core.runner import run_scenario, stack_config
 
 NODES = ('thrust_allocator', 'wrench_controller', 'reference_publisher', 'plant_simulator')
@@ -53,18 +57,68 @@ def test_a_node_failing_at_start_stops_the_launch(tmp_path: Path) -> None:
     assert 'wrench_controller' in result.stderr
 
 
-def _start(tmp_path: Path, *args: str) -> tuple[subprocess.Popen[str], dict[str, int]]:
-    process = subprocess.Popen(_tiltrov(*args), stdout=subprocess.PIPE,
-                               stderr=subprocess.STDOUT, text=True, cwd=tmp_path)
-    pids: dict[str, int] = {}
-    assert process.stdout is not None
-    for line in process.stdout:
-        if line.startswith('[launch]') and 'started ' in line:
-            name = line.split('started ')[1].split()[0]
-            pids[name] = int(line.rsplit('pid ', 1)[1].rstrip(')\n'))
-        if line.startswith('[plant_simulator]') and 'realtime' in line:
-            break
-    return process, pids
+class _Launch:
+    """``tiltrov launch`` as a process: its output (read by a thread, so the pipe never
+    fills) and its ``--status-file`` (the pids of the nodes it started, its state)."""
+
+    def __init__(self, tmp_path: Path, *args: str) -> None:
+        self.status_path = tmp_path / 'launch_status.json'
+        self.process = subprocess.Popen(
+            _tiltrov(*args, '--status-file', str(self.status_path)), stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT, text=True, cwd=tmp_path)
+        self.lines: list[str] = []
+        self._reader = threading.Thread(
+            target=lambda: self.lines.extend(self.process.stdout or ()), daemon=True)
+        self._reader.start()
+        self.seen: set[int] = set()      # every pid the status file ever named
+
+    @property
+    def output(self) -> str:
+        return ''.join(self.lines)
+
+    def status(self) -> dict[str, Any]:
+        try:
+            status = json.loads(self.status_path.read_text())
+        except (FileNotFoundError, json.JSONDecodeError):
+            return {}
+        self.seen |= {node['pid'] for node in status['nodes'].values()}
+        return status
+
+    def pids(self) -> dict[str, int]:
+        return {name: node['pid'] for name, node in self.status().get('nodes', {}).items()}
+
+    def wait_running(self, timeout: float = 60.0) -> dict[str, int]:
+        """The nodes' pids once every node is started (state ``running``)."""
+        deadline = time.monotonic() + timeout
+        while self.status().get('state') != 'running':
+            assert time.monotonic() < deadline and self.process.poll() is None, self.output
+            time.sleep(0.05)
+        return self.pids()
+
+    def finish(self, timeout: float) -> int:
+        code = self.process.wait(timeout=timeout)
+        self._reader.join(timeout=5)
+        return code
+
+    def cleanup(self) -> None:
+        """Whatever a failed test left running: the launcher and the nodes it started."""
+        if self.process.poll() is None:
+            self.process.kill()
+            self.process.wait(timeout=10)
+        self.status()
+        for pid in self.seen:
+            if _alive(pid):
+                os.kill(pid, signal.SIGKILL)
+
+
+def _ready(ros: Any, names: Sequence[str], until: Any = None,
+           timeout: float = 60.0) -> Probe:
+    """Spin until every node in ``names`` has published /diagnostics (it is built and
+    spinning, its signal handlers installed) and ``until(probe)`` holds."""
+    probe = Probe(ros.node('launch_probe'), ['/diagnostics'])
+    assert ros.spin_until(lambda: all(diagnostics(probe, name) for name in names)
+                          and (until is None or until(probe)), timeout=timeout)
+    return probe
 
 
 def _alive(pid: int) -> bool:
@@ -75,43 +129,37 @@ def _alive(pid: int) -> bool:
     return True
 
 
-def _cleanup(process: subprocess.Popen[str], pids: dict[str, int]) -> None:
-    """Whatever a failed test left running: the launcher and the nodes it started."""
-    if process.poll() is None:
-        process.kill()
-        process.wait(timeout=10)
-    for pid in pids.values():
-        if _alive(pid):
-            os.kill(pid, signal.SIGKILL)
-
-
 @pytest.mark.slow
-def test_a_node_dying_mid_run_stops_the_others(tmp_path: Path) -> None:
-    process, pids = _start(tmp_path, '--realtime', '--duration', '600')
+def test_a_node_dying_mid_run_stops_the_others(ros: Any, tmp_path: Path) -> None:
+    launch = _Launch(tmp_path, '--realtime', '--duration', '600')
     try:
+        pids = launch.wait_running()
         assert set(pids) == set(NODES)
+        _ready(ros, NODES)
         os.kill(pids['wrench_controller'], signal.SIGKILL)
-        out, _ = process.communicate(timeout=60)
-        assert process.returncode == 1
+        assert launch.finish(timeout=60) == 1
+        out = launch.output
         assert f'wrench_controller died (exit code {-signal.SIGKILL})' in out
         assert not any(_alive(pid) for pid in pids.values())
+        assert launch.status()['state'] == 'ended' and launch.status()['exit_code'] == 1
     finally:
-        _cleanup(process, pids)
+        launch.cleanup()
 
 
 @pytest.mark.slow
-def test_ctrl_c_stops_every_node_cleanly(tmp_path: Path) -> None:
-    process, pids = _start(tmp_path, '--realtime', '--duration', '600')
+def test_ctrl_c_stops_every_node_cleanly(ros: Any, tmp_path: Path) -> None:
+    launch = _Launch(tmp_path, '--realtime', '--duration', '600')
     try:
-        time.sleep(0.5)
-        process.send_signal(signal.SIGINT)
-        out, _ = process.communicate(timeout=60)
-        assert process.returncode == 130, out
+        pids = launch.wait_running()
+        _ready(ros, NODES)
+        launch.process.send_signal(signal.SIGINT)
+        assert launch.finish(timeout=60) == 130, launch.output
+        out = launch.output
         assert 'SIGINT: stopping every node' in out
         assert 'SIGTERM' not in out and 'SIGKILL' not in out     # SIGINT was enough
         assert not any(_alive(pid) for pid in pids.values())
     finally:
-        _cleanup(process, pids)
+        launch.cleanup()
 
 
 @pytest.mark.slow
@@ -137,7 +185,8 @@ def test_record_gives_a_bag_equal_to_the_headless_run(tmp_path: Path,
 
 @pytest.mark.slow
 @pytest.mark.parametrize('victim', ['thrust_allocator', 'wrench_controller'])
-def test_a_killed_node_is_respawned_and_the_loop_resumes(tmp_path: Path, victim: str) -> None:
+def test_a_killed_node_is_respawned_and_the_loop_resumes(ros: Any, tmp_path: Path,
+                                                         victim: str) -> None:
     """kill -9 of the allocator (or the controller) mid-run (lockstep, recorded,
     --respawn): the plant keeps its state and waits at its tick (a stall,
     re-published), the new process answers it, the run ends normally; the bag has
@@ -148,29 +197,20 @@ def test_a_killed_node_is_respawned_and_the_loop_resumes(tmp_path: Path, victim:
 
     bag = tmp_path / 'bag'
     duration = 120.0           # some 8 s wall in lockstep: the kill lands mid-run
-    process = subprocess.Popen(
-        _tiltrov('--duration', str(duration), '--record', str(bag), '--respawn', victim,
-                 '--stall-timeout', '0.5'),
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=tmp_path)
-    lines: list[str] = []
-    reader = threading.Thread(target=lambda: lines.extend(process.stdout or ()), daemon=True)
-    reader.start()
-    pids: dict[str, int] = {}
+    launch = _Launch(tmp_path, '--duration', str(duration), '--record', str(bag),
+                     '--respawn', victim, '--stall-timeout', '0.5')
     try:
-        deadline = time.monotonic() + 60
-        while not any('[plant_simulator]' in line and 'lockstep' in line for line in lines):
-            assert time.monotonic() < deadline and process.poll() is None, ''.join(lines)
-            time.sleep(0.05)
-        time.sleep(3.0)       # the plant is stepping by now (start-up takes about 1 s)
-        for line in list(lines):
-            if line.startswith('[launch]') and 'started ' in line:
-                pids[line.split('started ')[1].split()[0]] = int(
-                    line.rsplit('pid ', 1)[1].rstrip(')\n'))
+        pids = launch.wait_running()
+
+        def stepping(probe: Probe) -> bool:     # the plant is past t = 0
+            return float(diagnostics(probe, PLANT).get('sim_time', 0.0)) > 0.0
+
+        _ready(ros, (PLANT, victim), until=stepping)
         os.kill(pids[victim], signal.SIGKILL)
-        assert process.wait(timeout=120) == 0, ''.join(lines)
+        assert launch.finish(timeout=120) == 0, launch.output
     finally:
-        _cleanup(process, pids)
-    reader.join(timeout=5)
+        launch.cleanup()
+    lines = launch.lines
     out = ''.join(lines)
     assert f'{victim} died (exit code {-signal.SIGKILL}); starting it again' in out
     assert out.count(f'started {victim}') == 2

@@ -48,6 +48,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "50.0]' (repeatable)")
     parser.add_argument('--stall-timeout', type=float, default=None, metavar='SEC',
                         help='lockstep: wall seconds before the plant reports a stall')
+    parser.add_argument('--status-file', type=Path, default=None, metavar='FILE',
+                        help='keep FILE up to date with the state of the launch (JSON: '
+                             'state, each node\'s pid and starts, the exit code), for '
+                             'scripts that wait on it')
     parser.add_argument('--respawn', action='append', default=[], choices=RESPAWNABLE,
                         metavar='NODE',
                         help='start NODE again when its process dies mid-run '
@@ -61,7 +65,7 @@ def options_from_args(args: argparse.Namespace) -> LaunchOptions:
         real_time_factor=args.real_time_factor, record=args.record,
         single_process=args.single_process, namespace=args.namespace,
         params=tuple(args.param), stall_timeout=args.stall_timeout, executor=args.executor,
-        respawn=tuple(args.respawn))
+        respawn=tuple(args.respawn), status_file=args.status_file)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 import importlib
+import os
+from pathlib import Path
 import threading
 import time
 from typing import Any
@@ -16,7 +18,7 @@ from tiltrov_ros.core.names import (
 )
 
 from .specs import NodeSpec
-from .supervisor import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, Output
+from .supervisor import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, Output, StatusFile
 
 
 def build_node(spec: NodeSpec, context: Any, namespace: str = '') -> Any:
@@ -46,8 +48,10 @@ def build_nodes(specs: Sequence[NodeSpec], context: Any, namespace: str = '') ->
 
 
 def run_single_process(specs: Sequence[NodeSpec], namespace: str, out: Output,
-                       summary: str, executor_kind: str | None = None) -> int:
-    """Every node in this process, bound to one context.
+                       summary: str, executor_kind: str | None = None, *,
+                       status_file: Path | None = None) -> int:
+    """Every node in this process, bound to one context (``status_file``: see
+    :class:`~tiltrov_ros.stack.supervisor.StatusFile`; every node has this pid).
 
     The stack nodes share one executor (``nodes.executors.make_executor``). The
     recorder, if any, spins on its own SingleThreadedExecutor in a second
@@ -69,12 +73,14 @@ def run_single_process(specs: Sequence[NodeSpec], namespace: str, out: Output,
     side: Any = None
     side_thread: threading.Thread | None = None
     started = time.monotonic()
+    status = StatusFile(status_file)
+    code = EXIT_FAILED
     try:
         try:
             nodes = build_nodes(specs, context, namespace)
         except STARTUP_ERRORS as exc:
             out.line('launch', f'cannot start the stack: {exc}')
-            return EXIT_FAILED
+            return code
         by_name = {s.name: n for n, s in zip(nodes, specs)}
         plant = by_name[PLANT]
         executor = make_executor(context, executor_kind)
@@ -86,13 +92,17 @@ def run_single_process(specs: Sequence[NodeSpec], namespace: str, out: Output,
             side.add_node(by_name[RECORDER])
             side_thread = threading.Thread(target=side.spin, name=RECORDER, daemon=True)
             side_thread.start()
+        status.write('running', {s.name: {'pid': os.getpid(), 'starts': 1, 'running': True}
+                                 for s in specs})
         try:
             spin_until(executor, context, plant.finished)
         except KeyboardInterrupt:
             out.line('launch', 'SIGINT: stopping every node')
-            return EXIT_INTERRUPTED
+            code = EXIT_INTERRUPTED
+            return code
         out.line('launch', f'{summary} done in {time.monotonic() - started:.2f} s wall')
-        return EXIT_OK
+        code = EXIT_OK
+        return code
     finally:
         if executor is not None:
             executor.shutdown()
@@ -104,3 +114,5 @@ def run_single_process(specs: Sequence[NodeSpec], namespace: str, out: Output,
         for node in reversed(nodes):
             node.destroy_node()
         rclpy.try_shutdown(context=context)
+        status.write('ended', {s.name: {'pid': os.getpid(), 'starts': 1, 'running': False}
+                               for s in specs}, code)

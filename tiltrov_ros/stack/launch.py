@@ -39,7 +39,9 @@ def launch(options: LaunchOptions, stream: IO[str] | None = None, *,
             namespaced_config(specs, namespace, Path(tmp))
             specs, _, _ = stack_specs(options, config_dir=Path(tmp))
         if options.single_process:
-            return run_single_process(specs, namespace, out, summary, options.executor)
+            return run_single_process(specs, namespace, out, summary, options.executor,
+                                      status_file=options.status_file)
         env = {'TILTROV_EXECUTOR': options.executor} if options.executor else {}
         return run_processes(specs, namespace, out, summary, Path(tmp), env,
-                             respawn=options.respawn, monitor=monitor, linger=linger)
+                             respawn=options.respawn, monitor=monitor, linger=linger,
+                             status_file=options.status_file)

@@ -60,6 +60,7 @@ class LaunchOptions:
     stall_timeout: float | None = None
     executor: str | None = None            # None: TILTROV_EXECUTOR or 'events'
     respawn: tuple[str, ...] = ()          # node names started again when they die
+    status_file: Path | None = None        # the launch's state as JSON (StatusFile)
 
 
 @dataclass(frozen=True)

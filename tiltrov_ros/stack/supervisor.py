@@ -20,6 +20,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 import contextlib
 from dataclasses import dataclass
+import json
 import os
 from pathlib import Path
 import signal
@@ -148,22 +149,117 @@ class Monitor:
         """Called once the plant has ended the run, before the others are stopped."""
 
 
+class StatusFile:
+    """``tiltrov launch --status-file FILE``: what the launch is doing, as JSON,
+    replaced atomically at each change, so a script (or a test) waits on it
+    instead of reading the output::
+
+        {"state": "running", "exit_code": null,
+         "nodes": {"plant_simulator": {"pid": 4242, "starts": 1, "running": true}, ...}}
+
+    ``state``: ``starting`` (processes being started), ``running`` (every node
+    started), ``stopping``, ``ended`` (``exit_code`` set). No file when ``path``
+    is None.
+    """
+
+    def __init__(self, path: Path | None) -> None:
+        self.path = path
+
+    def write(self, state: str, nodes: Mapping[str, Mapping[str, Any]],
+              exit_code: int | None = None) -> None:
+        if self.path is None:
+            return
+        document = {'state': state, 'exit_code': exit_code, 'nodes': dict(nodes)}
+        tmp = self.path.with_name(f'.{self.path.name}.tmp')
+        tmp.write_text(json.dumps(document, indent=1) + '\n', encoding='utf-8')
+        os.replace(tmp, self.path)
+
+
+class _Supervisor:
+    """The node processes of one launch (see :func:`run_processes`)."""
+
+    def __init__(self, namespace: str, out: Output, workdir: Path, env: Mapping[str, str],
+                 respawn: Sequence[str], monitor: Monitor | None, status: StatusFile) -> None:
+        self.namespace = namespace
+        self.out = out
+        self.workdir = workdir
+        self.env = dict(env)
+        self.respawn = respawn
+        self.monitor = monitor
+        self.status = status
+        self.children: list[_Child] = []
+        self.starts: dict[str, int] = {}
+
+    def start(self, spec: NodeSpec) -> _Child:
+        argv = executable(spec) + spec.ros_args(spec.write_overrides(self.workdir,
+                                                                     self.namespace),
+                                                 self.namespace)
+        process = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                                   stderr=subprocess.STDOUT, env=self.env,
+                                   start_new_session=True, preexec_fn=_die_with_parent)
+        pump = threading.Thread(target=self.out.pump, args=(spec.name, process.stdout),
+                                daemon=True)
+        pump.start()
+        self.starts[spec.name] = self.starts.get(spec.name, 0) + 1
+        self.out.line('launch', f'started {spec.name} (pid {process.pid})')
+        return _Child(spec, process, pump)
+
+    def report(self, state: str, code: int | None = None) -> None:
+        self.status.write(state, {c.spec.name: {'pid': c.process.pid,
+                                                'starts': self.starts[c.spec.name],
+                                                'running': c.process.poll() is None}
+                                  for c in self.children}, code)
+
+    def watch(self, summary: str, started: float, linger: float) -> int:
+        """Until the plant ends the run (EXIT_OK) or a node not respawned dies (EXIT_FAILED);
+        ``started``: monotonic time the launch began."""
+        while True:
+            for i, child in enumerate(self.children):
+                rc = child.process.poll()
+                if rc is None:
+                    continue
+                name = child.spec.name
+                if name == PLANT and rc == 0:
+                    wall = time.monotonic() - started
+                    if self.monitor is not None:
+                        self.monitor.finished(_pids(self.children))
+                    if linger > 0:
+                        time.sleep(linger)
+                    self.out.line('launch', f'{summary} done in {wall:.2f} s wall; stopping '
+                                            'the other nodes')
+                    return EXIT_OK
+                if name in self.respawn:
+                    child.pump.join(timeout=2.0)
+                    self.out.line('launch', f'{name} died (exit code {rc}); starting it again '
+                                            '(--respawn)')
+                    self.children[i] = self.start(child.spec)
+                    self.report('running')
+                    continue
+                self.out.line('launch', f'{name} died (exit code {rc}); stopping the other '
+                                        'nodes')
+                return EXIT_FAILED
+            if self.monitor is not None:
+                self.monitor.poll(_pids(self.children))
+            time.sleep(POLL)
+
+
 def run_processes(specs: Sequence[NodeSpec], namespace: str, out: Output,
                   summary: str, workdir: Path, extra_env: Mapping[str, str] | None = None,
                   *, respawn: Sequence[str] = (), monitor: Monitor | None = None,
-                  linger: float = 0.0) -> int:
+                  linger: float = 0.0, status_file: Path | None = None) -> int:
     """Start every node as a process; return when the run ends or a node dies.
 
     A node named in ``respawn`` that dies is started again instead. ``linger``:
     wall seconds to wait after the plant's end before stopping the others (their
-    last /diagnostics, with final counts, reach the recorder).
+    last /diagnostics, with final counts, reach the recorder). ``status_file``:
+    see :class:`StatusFile`.
     """
     env = dict(os.environ, PYTHONUNBUFFERED='1', RCUTILS_LOGGING_BUFFERED_STREAM='1',
                **(extra_env or {}))
     out.width = max(len(s.name) for s in specs)
-    children: list[_Child] = []
+    supervisor = _Supervisor(namespace, out, workdir, env, respawn, monitor,
+                             StatusFile(status_file))
     previous = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
-
     stopping = threading.Event()
     hurry = threading.Event()
 
@@ -179,62 +275,30 @@ def run_processes(specs: Sequence[NodeSpec], namespace: str, out: Output,
     try:
         for sig in previous:
             signal.signal(sig, on_signal)
-        def start(spec: NodeSpec) -> _Child:
-            argv = executable(spec) + spec.ros_args(spec.write_overrides(workdir, namespace),
-                                                     namespace)
-            process = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                                       stderr=subprocess.STDOUT, env=env,
-                                       start_new_session=True, preexec_fn=_die_with_parent)
-            pump = threading.Thread(target=out.pump, args=(spec.name, process.stdout),
-                                    daemon=True)
-            pump.start()
-            out.line('launch', f'started {spec.name} (pid {process.pid})')
-            return _Child(spec, process, pump)
-
+        supervisor.report('starting')
         for spec in specs:
-            children.append(start(spec))
-        while True:
-            for i, child in enumerate(children):
-                rc = child.process.poll()
-                if rc is None:
-                    continue
-                if child.spec.name == PLANT and rc == 0:
-                    wall = time.monotonic() - started
-                    if monitor is not None:
-                        monitor.finished(_pids(children))
-                    if linger > 0:
-                        time.sleep(linger)
-                    out.line('launch', f'{summary} done in {wall:.2f} s wall; stopping the '
-                                       'other nodes')
-                    return code
-                if child.spec.name in respawn:
-                    child.pump.join(timeout=2.0)
-                    out.line('launch', f'{child.spec.name} died (exit code {rc}); starting '
-                                       'it again (--respawn)')
-                    children[i] = start(child.spec)
-                    continue
-                out.line('launch', f'{child.spec.name} died (exit code {rc}); stopping the '
-                                   'other nodes')
-                code = EXIT_FAILED
-                return code
-            if monitor is not None:
-                monitor.poll(_pids(children))
-            time.sleep(POLL)
+            supervisor.children.append(supervisor.start(spec))
+            supervisor.report('starting')
+        supervisor.report('running')
+        code = supervisor.watch(summary, started, linger)
+        return code
     except _Stop as stop:
         out.line('launch', f'{stop.args[0]}: stopping every node')
         code = EXIT_INTERRUPTED
         return code
     finally:
         stopping.set()              # from here on a signal only hurries the stop
+        supervisor.report('stopping')
         try:
-            _stop_children(children, out, hurry)
+            _stop_children(supervisor.children, out, hurry)
         finally:
             for sig, handler in previous.items():
                 signal.signal(sig, handler)
         if code == EXIT_FAILED:
-            dead = [c.spec.name for c in children
+            dead = [c.spec.name for c in supervisor.children
                     if c.process.returncode not in (0, None, -signal.SIGINT)]
             print(f'tiltrov launch: failed: {", ".join(dead) or "a node"} died', file=sys.stderr)
+        supervisor.report('ended', code)
 
 
 def _pids(children: Sequence[_Child]) -> dict[str, int]:
