@@ -52,7 +52,7 @@ soak: $(STAMP)
 	$(VENV)/bin/tiltrov soak
 
 figures: $(STAMP)
-	$(VENV)/bin/tiltrov report --readme README.md
+	$(VENV)/bin/tiltrov report --page docs/results.md
 
 docs: $(STAMP)
 	$(PY) -m tiltrov_ros.nodes.parameter_docs docs/parameters.md

@@ -1,4 +1,4 @@
-"""``tiltrov report``: the README section, its markers, and the committed results."""
+"""``tiltrov report``: the results section, its markers, and the committed results page."""
 
 from __future__ import annotations
 
@@ -66,9 +66,9 @@ def test_report_without_a_readme_file_fails_cleanly(tmp_path: Path, capsys) -> N
     assert capsys.readouterr().err.startswith('tiltrov report: error: no README')
 
 
-def test_committed_readme_is_up_to_date_with_the_gains_and_figures() -> None:
+def test_committed_results_page_is_up_to_date_with_the_gains_and_figures() -> None:
     # `make figures` regenerates the section; this catches a gain changed without it.
-    text = (REPO / 'README.md').read_text()
+    text = (REPO / 'docs' / 'results.md').read_text()
     section = text[text.index(BEGIN):text.index(END)]
     assert 'Shortened' not in section
     gains = load_controller_config().gains
@@ -79,4 +79,4 @@ def test_committed_readme_is_up_to_date_with_the_gains_and_figures() -> None:
     images = re.findall(r'!\[[^\]]*\]\(([^)]+)\)', section)
     assert len(images) >= 8
     for path in images:
-        assert (REPO / path).is_file(), path
+        assert (REPO / 'docs' / path).is_file(), path

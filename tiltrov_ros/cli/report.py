@@ -1,6 +1,6 @@
 """``tiltrov report``: the paper's scenarios with every controller, headless, into
-the results page and its figures (``make figures``; what is run and written:
-:mod:`tiltrov_ros.analysis.report`)."""
+the results page and its figures (``make figures``: ``--page docs/results.md``;
+what is run and written: :mod:`tiltrov_ros.analysis.report`)."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ from pathlib import Path
 import sys
 
 from tiltrov_ros.analysis.report import (
-    acceptance,
     build_section,
+    checks,
     relative,
     run_scenarios,
     update_readme,
@@ -22,25 +22,34 @@ from tiltrov_ros.core.metrics import compute_metrics
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument('--readme', type=Path, metavar='FILE',
-                        help='README to update between the results markers (default: only '
-                             'print the section)')
+    parser.add_argument('--page', '--readme', dest='page', type=Path, metavar='FILE',
+                        help='Markdown page to update between the results markers, e.g. '
+                             'docs/results.md (default: only print the section)')
     parser.add_argument('--out', type=Path, metavar='DIR',
-                        help='figure directory (default: docs/figures next to the README, '
-                             'or ./docs/figures)')
+                        help='figure directory (default: the docs/figures directory of the '
+                             "page's project: beside a page in docs/, else under it)")
     parser.add_argument('--dpi', type=int, default=80, help='figure resolution (default 80)')
     parser.add_argument('--duration', type=float, metavar='SEC',
-                        help='shorten every run to SEC (for trying the command; the README '
-                             'numbers are for the full scenarios)')
+                        help='shorten every run to SEC (for trying the command; the '
+                             'published numbers are for the full scenarios)')
 
+
+
+def figure_dir(page: Path | None) -> Path:
+    """Where the figures go by default: ``docs/figures`` of the page's project (the
+    page's directory, or its parent when the page is in ``docs/``)."""
+    base = page.parent if page is not None else Path('.')
+    if base.name == 'docs':
+        base = base.parent
+    return base / 'docs' / 'figures'
 
 
 def run(args: argparse.Namespace) -> int:
-    readme: Path | None = args.readme
-    out: Path = args.out or ((readme.parent if readme else Path('.')) / 'docs' / 'figures')
+    readme: Path | None = args.page
+    out: Path = args.out or figure_dir(readme)
     try:
         if readme is not None and not readme.is_file():
-            raise InputError(f'no README at {readme}')
+            raise InputError(f'no README or page at {readme}')
         runs = run_scenarios(args.duration)
         results = [(config, compute_metrics(log)) for config, log in runs]
         out.mkdir(parents=True, exist_ok=True)
@@ -57,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
             readme.write_text(update_readme(readme.read_text(encoding='utf-8'), section),
                               encoding='utf-8')
             print(f'updated {readme} ({len(results)} runs, {len(figures)} figures in {out})')
-        for line in acceptance(results):
+        for line in checks(results):
             print(line.replace('**', ''))
     except InputError as exc:
         print(f'tiltrov report: error: {exc}', file=sys.stderr)
