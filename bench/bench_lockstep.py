@@ -14,7 +14,7 @@ Measured in one run, so the ratios hold on any machine:
   t_i and the ``thrust_cmd`` stamped t_i (both DDS reception times in the
   probe's process), median and 99th percentile.
 
-Aims (issue 6): RTF >= 10 with separate processes, >= 20 in a single process;
+Aims: RTF >= 10 with separate processes, >= 20 in a single process;
 latency < 2 ms at the 99th percentile.
 
 Run ``python bench/bench_lockstep.py`` (about a minute); ``main()`` returns the
@@ -114,7 +114,7 @@ def latency(seconds_of_sim: float, real_time_factor: float,
     # The probe's participant is created while the nodes start (once the launcher has
     # started the plant's process): without multicast, participants created far apart
     # in time find each other only at the next periodic announcement (Fast DDS: 3 s),
-    # see README.md, "Lockstep and realtime".
+    # see docs/launch.md, "Lockstep and realtime".
     launch = subprocess.Popen(_launch_argv(*args), stdout=subprocess.PIPE,
                               stderr=subprocess.STDOUT, text=True, cwd=tempfile.gettempdir())
     lines: list[str] = []

@@ -152,7 +152,7 @@ def test_replayed_wrench_cmd_drives_the_allocator_like_the_live_stack(
 
 @pytest.mark.slow
 def test_a_120_s_lockstep_run_is_recorded_without_losing_a_message(tmp_path: Path) -> None:
-    """Issue 7's sizing check: the 120 s trajectory (the busiest shipped scenario)
+    """The sizing check: the 120 s trajectory (the busiest shipped scenario)
     in separate processes; every message each node publishes is in the bag.
 
     The publishers' side is counted from the run's definition: the plant

@@ -1,4 +1,4 @@
-"""``tiltrov demo`` (``make demo``): the README's first command, the main job end to end.
+"""``tiltrov demo`` (``make demo``): the first command of the README, the main job end to end.
 
 The full ROS stack on the paper's positioning scenario (Section 4.1,
 ``pitch_hold``), once per controller, each run recorded into an MCAP bag, then

@@ -25,7 +25,7 @@ A scenario file (``config/scenarios/<name>.yaml``, or any path) is plain YAML::
       nu: [0, 0, 0, 0, 0, 0]          # body velocity
     robot:                            # overrides of config/robot.yaml
       tilt_rate_limit: 1.0471975511965976
-    faults:                           # actuator faults (README.md, "Reliability")
+    faults:                           # actuator faults (docs/reliability.md)
       - {thruster: 2, at: 20.0, detected_after: 0.0}   # thruster_2 gives no thrust from
                                       # 20 s; the allocator knows from 20 s + detected_after
 
@@ -44,8 +44,8 @@ The reference gives eta_d and its exact time derivative (the feed-forward of
 quaternion. At the instant of a kink the rate is a one-sided derivative: a
 ramp's rate is 0 at its start and at its end (the rate of the held pieces), a
 sine's is its own rate at ``start`` and ``end``; a step's jump contributes no
-rate. (Which side is taken matters more than it seems: see README.md, "Known
-limitations", on the allocator holding both pairs at the +-90 deg edge.)
+rate. (Which side is taken matters more than it seems: see
+docs/limitations.md on the allocator holding both pairs at the +-90 deg edge.)
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ Pure functions on plain values (no rclpy): the nodes take the fields out of a
 message and call these. An input check raises :class:`InvalidInput` with a
 short machine-readable ``reason`` (one of :data:`REASONS`, the key under which
 ``/diagnostics`` counts it) and a sentence for the log; the node rejects the
-message (README.md, "Reliability").
+message (docs/reliability.md).
 
 Stamps are integer nanoseconds. The bounds are relative to the receiving
 node's clock (sim time when the node runs on ``/clock``, the plant's own sim

@@ -3,7 +3,7 @@
 The serialized CDR bytes each subscription receives are written untouched
 (raw subscriptions, no deserialization), with the publishers' QoS in the
 metadata and the message definitions as ``ros2msg`` schemas, so ``ros2 bag``,
-rosbags, the mcap library and Foxglove open the bag. See README.md, "Bags".
+rosbags, the mcap library and Foxglove open the bag. See docs/bags.md.
 
 Design points:
 

@@ -130,7 +130,7 @@ def input_callback(topic: str) -> Callable[[F], F]:
 
 
 class SafePublisher:
-    """A publisher that never sends NaN or infinity (README.md, "Reliability").
+    """A publisher that never sends NaN or infinity (docs/reliability.md).
 
     A message with a non-finite float is not published: the node counts it
     (``unsafe_outputs`` on /diagnostics, ERROR level), logs it, and publishes

@@ -81,7 +81,7 @@ from .plant_config import declare_parameters
 from .qos import PUBLISHER_QOS, RELIABLE_QOS
 
 #: joint_states value of a field a joint does not have (thruster position and
-#: velocity, servo effort): 0.0, since no topic carries NaN (README.md, "Reliability").
+#: velocity, servo effort): 0.0, since no topic carries NaN (docs/reliability.md).
 NO_VALUE = 0.0
 #: s (wall): how often the lockstep watchdog looks at the start-up and stall state.
 WATCHDOG_PERIOD = 0.05

@@ -20,7 +20,7 @@ from tiltrov_ros.core.names import LOCKSTEP
 # unmatched until its discovery poll re-subscribes, losing the start of the
 # run). A reader that tolerates loss asks for BEST_EFFORT (sensor data), which
 # matches a reliable writer: the controller's odometry in realtime mode does.
-# See README.md, "Topics and QoS".
+# See docs/nodes.md, "Topics and QoS".
 
 #: Commands, setpoints, odometry, joint states: reliable, last 10. In lockstep at
 #: most control_period / step_size (5) odometry samples are in flight.

@@ -11,7 +11,7 @@ if TYPE_CHECKING:
 
 
 class InputWatchdog:
-    """One input's freshness against a timeout (README.md, "Reliability"): the newest
+    """One input's freshness against a timeout (docs/reliability.md): the newest
     message's stamp and arrival, whether it is stale, how often it went stale; each
     transition logged once. The controller watches ``odom`` with it, the allocator
     ``wrench_cmd``.
