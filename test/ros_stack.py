@@ -20,11 +20,11 @@ from sensor_msgs.msg import JointState
 
 from tiltrov_ros.core import names
 from tiltrov_ros.core.names import PLANT
+from tiltrov_ros.core.timebase import NS_PER_S as NS
 from tiltrov_ros.nodes.conversions import stamp_ns
 from tiltrov_ros.stack.inprocess import build_nodes
 from tiltrov_ros.stack.specs import LaunchOptions, NodeSpec, stack_specs
 
-NS = 1_000_000_000
 MS = 1_000_000
 
 #: Probe readers: reliable, keep everything (the stack's writers are reliable).

@@ -12,14 +12,15 @@ from rclpy.parameter import Parameter
 from ros_stack import KEEP_ALL, MS, NS, Probe, finite_outputs, joint_state, report
 from sensor_msgs.msg import JointState
 
+from tiltrov_ros.core import names
 from tiltrov_ros.core.errors import ParameterError
 from tiltrov_ros.core.runner import stack_config
 from tiltrov_ros.nodes import plant_simulator
 from tiltrov_ros.nodes.plant_simulator import PlantSimulator
 from tiltrov_ros.paths import config_file
 
-THRUSTERS = ['thruster_1', 'thruster_2', 'thruster_3', 'thruster_4']
-TILTS = ['tilt_front', 'tilt_rear']
+THRUSTERS = list(names.THRUSTERS)
+TILTS = list(names.TILTS)
 STEP = 10 * MS
 
 

@@ -326,7 +326,7 @@ class PIDController:
 class SwitchingController:
     """The selective switching baseline (see the module docstring for the rule)."""
 
-    TILTS: ClassVar[dict[str, tuple[float, float]]] = {
+    MODE_TILTS: ClassVar[dict[str, tuple[float, float]]] = {
         'horizontal': (0.0, 0.0), 'vertical': (0.5 * math.pi, 0.5 * math.pi)}
 
     def __init__(self, gains: Gains, settings: SwitchingSettings, robot: RobotParams) -> None:
@@ -353,7 +353,7 @@ class SwitchingController:
         return h, v
 
     def _switch_to(self, mode: str, t: float) -> None:
-        target = self.TILTS[mode]
+        target = self.MODE_TILTS[mode]
         travel = max(abs(target[0] - self.tilts[0]), abs(target[1] - self.tilts[1]))
         self._moving_until = t + travel / self.robot.tilt_rate_limit + self.settings.settle_time
         self._switched_at = t
