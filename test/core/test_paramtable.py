@@ -9,21 +9,21 @@ import numpy as np
 import pytest
 
 from tiltrov_ros.core.errors import ParameterError
-from tiltrov_ros.core.paramtable import SHIPPED, UNSET, Param, ParamTable, ros_parameters
+from tiltrov_ros.core.paramtable import SHIPPED, Param, ParamTable, ros_parameters
 
 TABLE = ParamTable('sample', [
-    Param('rate', 'float', 1.0, 'a rate', 's', low=0.0, high=10.0, low_open=True),
+    Param('rate', 'float', 1.0, 'a rate', 's', low=0.001, high=10.0),
     Param('count', 'int', 3, 'a count', low=0, high=100),
     Param('mode', 'str', 'fast', 'a mode', choices=('fast', 'slow', 'off')),
     Param('flag', 'bool', False, 'a flag', read_only=True),
     Param('gains', 'floats', SHIPPED, 'six gains', 'N/m', size=6, low=0.0),
     Param('ids', 'ints', [], 'some ids', low=1, high=4, distinct=True, note=' (or none)'),
-    Param('names', 'strs', UNSET, 'some names'),
+    Param('names', 'strs', (), 'some names'),
 ], prefix='group')
 
 
 @pytest.mark.parametrize(('name', 'text'), [
-    ('rate', 'a number in (0, 10]'),
+    ('rate', 'a number in [0.001, 10]'),
     ('count', 'an integer in [0, 100]'),
     ('mode', 'fast, slow or off'),
     ('flag', 'true or false'),
@@ -37,8 +37,15 @@ def test_allowed_text(name: str, text: str) -> None:
 
 def test_unbounded_and_half_bounded_numbers_say_so() -> None:
     assert Param('x', 'float', 0.0, 'x').allowed() == 'a finite number'
-    assert Param('x', 'float', 0.0, 'x', high=5.0, high_open=True).allowed() == 'a number < 5'
-    assert Param('x', 'floats', UNSET, 'x', size=3).allowed() == '3 finite numbers'
+    assert Param('x', 'float', 0.0, 'x', high=5.0).allowed() == 'a number <= 5'
+    assert Param('x', 'floats', (), 'x', high=5.0, high_open=True).allowed() == (
+        'finite numbers < 5')
+    assert Param('x', 'floats', (), 'x', size=3).allowed() == '3 finite numbers'
+
+
+def test_a_single_number_has_a_closed_range_as_its_ros_descriptor() -> None:
+    with pytest.raises(ValueError, match='closed range'):
+        Param('x', 'float', 1.0, 'x', low=0.0, low_open=True)
 
 
 @pytest.mark.parametrize(('name', 'value', 'expected'), [
@@ -91,7 +98,7 @@ def test_markdown_has_one_row_per_parameter_with_its_allowed_text() -> None:
     assert lines[0].startswith('| parameter | default |') and len(lines) == 2 + 7
     assert ('| `group.gains` | `[1.0, 2.0, 3.0, 4.0, 5.0, 6.0]` | 6 finite numbers >= 0 | N/m'
             in text)
-    assert '| `group.names` | unset |' in text and '| `group.flag` | `false` |' in text
+    assert '| `group.names` | `[]` |' in text and '| `group.flag` | `false` |' in text
     assert "| `group.mode` | `fast` | fast, slow or off | - | yes |" in text
     assert len(TABLE.markdown(header=False).splitlines()) == 7
 

@@ -123,9 +123,9 @@ SWITCHING = ParamTable('switching', [
     Param('dwell_time', 'float', 1.0, 'switching only: least time between two switches', 's',
           low=0.0, high=1e6),
     Param('position_scale', 'float', 0.05, 'switching only: normalises position errors', 'm',
-          low=0.0, high=1e6, low_open=True),
+          low=1e-6, high=1e6),
     Param('angle_scale', 'float', 0.05, 'switching only: normalises angle errors', 'rad',
-          low=0.0, high=1e6, low_open=True),
+          low=1e-6, high=1e6),
     Param('deadband', 'float', 0.2, 'switching only: normalised error under which no switch '
           'happens', '-', low=0.0, high=1e6),
     Param('settle_time', 'float', 0.1, 'switching only: added to the servo travel before '

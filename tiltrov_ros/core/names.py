@@ -72,6 +72,8 @@ CONTROLLER = 'wrench_controller'
 ALLOCATOR = 'thrust_allocator'
 REFERENCE = 'reference_publisher'
 RECORDER = 'bag_recorder'
+#: Every node of the package (a parameter file section naming none of them is reported).
+NODES = (PLANT, CONTROLLER, ALLOCATOR, REFERENCE, RECORDER)
 
 # --------------------------------------------------------------------------- modes
 

@@ -48,27 +48,27 @@ ROBOT = ParamTable('robot', [
     Param('linear_damping', 'floats', SHIPPED,
           'linear damping added to (A.4) (the paper has none; may be left out: zero)',
           'N s/m, N m s', size=6, low=0.0, read_only=True),
-    Param('weight', 'float', SHIPPED, 'W = m g', 'N', low=0.0, low_open=True, read_only=True),
-    Param('buoyancy', 'float', SHIPPED, 'B', 'N', low=0.0, read_only=True),
+    Param('weight', 'float', SHIPPED, 'W = m g', 'N', low=0.1, high=1e6, read_only=True),
+    Param('buoyancy', 'float', SHIPPED, 'B', 'N', low=0.0, high=1e6, read_only=True),
     Param('center_of_gravity', 'floats', SHIPPED, 'nominal r_g in base_link_frd '
           '(the plant adds its com_error)', 'm', size=3, read_only=True),
     Param('center_of_buoyancy', 'floats', SHIPPED, 'r_b in base_link_frd', 'm', size=3,
           read_only=True),
-    Param('length', 'float', SHIPPED, 'l of eq. (4), thruster spacing along x', 'm', low=0.0,
-          low_open=True, read_only=True),
-    Param('width', 'float', SHIPPED, 'd of eq. (4), thruster spacing along y', 'm', low=0.0,
-          low_open=True, read_only=True),
+    Param('length', 'float', SHIPPED, 'l of eq. (4), thruster spacing along x', 'm',
+          low=0.01, high=100.0, read_only=True),
+    Param('width', 'float', SHIPPED, 'd of eq. (4), thruster spacing along y', 'm', low=0.01,
+          high=100.0, read_only=True),
     Param('max_thrust', 'float', SHIPPED, 'thrust limit of each thruster in both directions',
-          'N', low=0.0, low_open=True, read_only=True),
+          'N', low=0.01, high=1e5, read_only=True),
     Param('thruster_time_constant', 'float', SHIPPED,
           'first-order thruster time constant (0: the thrust follows the command at once)',
-          's', low=0.0, read_only=True),
+          's', low=0.0, high=100.0, read_only=True),
     Param('tilt_min', 'float', SHIPPED, 'lower servo angle limit (below tilt_max)', 'rad',
           low=-_PI, high=_PI, read_only=True),
     Param('tilt_max', 'float', SHIPPED, 'upper servo angle limit', 'rad', low=-_PI, high=_PI,
           read_only=True),
-    Param('tilt_rate_limit', 'float', SHIPPED, 'servo rate limit', 'rad/s', low=0.0,
-          low_open=True, read_only=True),
+    Param('tilt_rate_limit', 'float', SHIPPED, 'servo rate limit', 'rad/s', low=0.01,
+          high=1000.0, read_only=True),
 ], prefix=PREFIX)
 
 #: The paper's control cycle (Section 4), s; ``control_period`` when a file has none.
@@ -78,7 +78,7 @@ DEFAULT_CONTROL_PERIOD = 0.05
 STACK = ParamTable('control period', [
     Param('control_period', 'float', SHIPPED, 'control period T of the stack (a multiple of '
           'the plant step); control ticks are the sim times that are multiples of T', 's',
-          low=0.0, high=60.0, low_open=True, read_only=True),
+          low=0.001, high=60.0, read_only=True),
 ])
 
 

@@ -46,8 +46,6 @@ class _Marker:
 #: Default of a parameter whose value comes from a shipped file (the robot, the
 #: gains): the caller passes it (``defaults=``).
 SHIPPED: Any = _Marker('SHIPPED')
-#: Default of a parameter declared without a value (ROS: by type; value None).
-UNSET: Any = _Marker('UNSET')
 
 _ARRAY_ITEM = {'floats': 'float', 'ints': 'int', 'strs': 'str'}
 
@@ -65,7 +63,8 @@ class Param:
     """One parameter: its line in the table (see the module docstring).
 
     ``low``/``high`` bound numbers (each element of an array), open at
-    ``low_open``/``high_open``; ``size`` is an array's length (0: any);
+    ``low_open``/``high_open`` (arrays only: a single number's range is also its
+    ROS descriptor's, which is closed); ``size`` is an array's length (0: any);
     ``choices`` the allowed strings; ``distinct`` forbids repeated elements;
     ``note`` is appended to the allowed text (what a range cannot say).
     """
@@ -84,6 +83,11 @@ class Param:
     distinct: bool = False
     read_only: bool = False
     note: str = ''
+
+    def __post_init__(self) -> None:
+        if (self.low_open or self.high_open) and not self.is_array:
+            raise ValueError(f'{self.name}: a single number has a closed range (the ROS '
+                             'descriptor cannot say an open one)')
 
     @property
     def is_array(self) -> bool:
@@ -204,8 +208,8 @@ class ParamTable:
                  ) -> dict[str, Any]:
         """Every parameter of the table, checked, from ``values`` (keys without the
         prefix). A parameter absent from ``values`` takes its ``defaults`` entry,
-        else its table default (SHIPPED and UNSET ones are then missing: an
-        error); keys the table does not have are an error unless ``unknown``."""
+        else its table default (SHIPPED ones are then missing: an error); keys the
+        table does not have are an error unless ``unknown``."""
         if not unknown:
             for key in values:
                 if key not in self._params:
@@ -218,7 +222,7 @@ class ParamTable:
                 out[p.name] = p.check(values[p.name], prefix=self.prefix, source=source)
             elif defaults is not None and p.name in defaults:
                 out[p.name] = defaults[p.name]
-            elif p.default is SHIPPED or p.default is UNSET:
+            elif p.default is SHIPPED:
                 raise p.error(None, prefix=self.prefix, source=source,
                               message=f'missing; allowed: {p.allowed()}')
             else:
@@ -241,8 +245,6 @@ class ParamTable:
 
 
 def _shown(value: Any) -> str:
-    if value is UNSET:
-        return 'unset'
     if value is SHIPPED:
         return 'the shipped file\'s'
     if isinstance(value, bool):

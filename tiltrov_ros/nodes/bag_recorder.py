@@ -61,7 +61,7 @@ from tiltrov_ros.bag.topics import is_hidden, normalize_type
 from tiltrov_ros.bag.writer import COMPRESSIONS, BagWriter
 from tiltrov_ros.core.errors import BagError, ParameterError, TiltrovError
 from tiltrov_ros.core.names import CLOCK, RECORDER, STACK_TOPICS
-from tiltrov_ros.core.paramtable import UNSET, Param, ParamTable
+from tiltrov_ros.core.paramtable import Param, ParamTable
 from tiltrov_ros.core.timebase import cdr_stamp_ns
 
 from .base import TiltrovNode
@@ -91,10 +91,9 @@ class RecorderConfig:
 RECORDER_PARAMS = ParamTable('bag_recorder', [
     Param('output', 'str', '', 'bag directory to create (must not exist); empty: '
           'rosbag2_YYYY_MM_DD-HH_MM_SS in the working directory', read_only=True),
-    # String arrays are declared without a default: an empty YAML list reads as unset.
-    Param('topics', 'strs', UNSET, 'topics to record (relative names resolve in the node '
-          'namespace); unset or empty: every topic', read_only=True),
-    Param('exclude_topics', 'strs', UNSET, 'topics never recorded when recording every topic',
+    Param('topics', 'strs', (), 'topics to record (relative names resolve in the node '
+          'namespace); empty: every topic', read_only=True),
+    Param('exclude_topics', 'strs', (), 'topics never recorded when recording every topic',
           read_only=True),
     Param('include_hidden', 'bool', False, 'when recording every topic, also record hidden '
           'topics (a name token starting with _)', read_only=True),
@@ -126,7 +125,7 @@ def declare_parameters(node: Node) -> RecorderConfig:
     except BagError as exc:
         raise ParameterError('run_info', str(exc)) from None
     return RecorderConfig(
-        output=v['output'], topics=v['topics'] or (), exclude_topics=v['exclude_topics'] or (),
+        output=v['output'], topics=v['topics'], exclude_topics=v['exclude_topics'],
         include_hidden=v['include_hidden'], compression=v['compression'],
         queue_depth=v['queue_depth'], discovery_period=v['discovery_period'],
         flush_period=v['flush_period'], run_info=v['run_info'])

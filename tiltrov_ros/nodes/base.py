@@ -7,7 +7,6 @@ from __future__ import annotations
 from collections import Counter
 from collections.abc import Callable, Sequence
 import functools
-import sys
 import time
 from typing import Any, ClassVar, TypeVar
 
@@ -32,7 +31,16 @@ from tiltrov_ros.core.timebase import NS_PER_S
 from tiltrov_ros.core.validation import InvalidInput, StampBounds
 
 from .conversions import message_is_finite
-from .parameters import Overrides, allowed_text, as_parameters, declare, parameter_source
+from .parameters import (
+    Overrides,
+    allowed_text,
+    apply_command_line_order,
+    as_parameters,
+    declare,
+    init_args,
+    misdirected_sections,
+    parameter_source,
+)
 from .qos import RELIABLE_QOS
 
 #: s: repeated warnings from callbacks are throttled to one per this period.
@@ -194,11 +202,16 @@ class TiltrovNode(Node):
     def __init__(self, node_name: str, *, namespace: str | None = None,
                  context: Context | None = None, cli_args: Sequence[str] | None = None,
                  parameter_overrides: Overrides = None) -> None:
+        overrides = as_parameters(parameter_overrides)
         super().__init__(node_name, namespace=namespace, context=context,
                          cli_args=list(cli_args) if cli_args is not None else None,
-                         parameter_overrides=as_parameters(parameter_overrides))
-        #: Where parameter files are named (error messages say which file set a value).
-        self._source_args = [*(cli_args or ()), *sys.argv]
+                         parameter_overrides=overrides)
+        #: The process-wide arguments, then the node's own: parameter files and -p
+        #: values apply in this order (later ones win) and errors name the file.
+        self._source_args = [*init_args(self.context), *(cli_args or ())]
+        apply_command_line_order(self, self._source_args, keep=[p.name for p in overrides])
+        for line in misdirected_sections(self._source_args, self.get_fully_qualified_name()):
+            self.get_logger().warning(line)
         self.callback_errors = 0
         self.steady = steady_clock()
         self._diagnostics_pub = (self.create_publisher(DiagnosticArray, DIAGNOSTICS,
@@ -242,7 +255,8 @@ class TiltrovNode(Node):
             got = given.value if given is not None else value
             raise ParameterError(
                 name, f'got {got!r}; allowed: {allowed_text(descriptor, value)}',
-                source=parameter_source(name, self.get_name(), self._source_args)) from exc
+                source=parameter_source(name, self.get_fully_qualified_name(),
+                                        self._source_args)) from exc
 
     # -- hooks for subclasses ---------------------------------------------------
 

@@ -20,7 +20,7 @@ from rclpy.task import Future
 from tiltrov_ros.core.errors import ParameterError, TiltrovError
 
 from .base import TiltrovNode
-from .parameters import parameter_source
+from .parameters import parameter_source, remember_init_args
 
 #: Errors that stop a node at start-up with a message and exit code 1.
 STARTUP_ERRORS = (TiltrovError, ParameterException, ValueError, FileNotFoundError)
@@ -81,6 +81,7 @@ def main_loop(factory: Callable[[], TiltrovNode], args: list[str] | None, name: 
     """
     rclpy.init(args=args)
     context = rclpy.get_default_context()
+    remember_init_args(context, args)
     node: TiltrovNode | None = None
     executor: Executor | None = None
     code = 0

@@ -11,7 +11,7 @@ from tiltrov_ros.core.errors import ParameterError
 from tiltrov_ros.core.kinematics import quat_from_euler
 from tiltrov_ros.core.names import MODES, REALTIME
 from tiltrov_ros.core.params import RobotParams
-from tiltrov_ros.core.paramtable import UNSET, Param, ParamTable
+from tiltrov_ros.core.paramtable import Param, ParamTable
 from tiltrov_ros.core.plant import Plant
 from tiltrov_ros.core.scenarios import InitialState, Scenario, ThrusterFault, load_scenario
 from tiltrov_ros.core.timebase import to_ns
@@ -33,11 +33,11 @@ PLANT_PARAMS = ParamTable('plant_simulator', [
     Param('scenario', 'str', '', 'scenario name (config/scenarios/<name>.yaml) or path: '
           'initial state, disturbances and robot overrides; empty: at rest at the origin, no '
           'disturbance', read_only=True),
-    Param('com_error', 'floats', UNSET, "true center of gravity minus the nominal one, in "
-          "base_link_frd (the paper's disturbance); overrides the scenario's; unset: the "
-          "scenario's (or zero)", 'm', size=3, read_only=True),
-    Param('current', 'floats', UNSET, "mean ocean current in odom_ned; overrides the "
-          "scenario's; unset: the scenario's (or zero)", 'm/s', size=3, read_only=True),
+    Param('com_error', 'floats', (0.0, 0.0, 0.0), "true center of gravity minus the nominal "
+          "one, in base_link_frd (the paper's disturbance); default: the scenario's (zero "
+          "without one)", 'm', size=3, read_only=True),
+    Param('current', 'floats', (0.0, 0.0, 0.0), "mean ocean current in odom_ned; default: the "
+          "scenario's (zero without one)", 'm/s', size=3, read_only=True),
     Param('duration', 'float', 0.0, 'sim time at which the run ends (a whole number of '
           'steps); 0: never', 's', low=0.0, high=1e9, read_only=True),
     Param('exit_at_end', 'bool', False, 'exit the process (code 0) when duration is reached, '
@@ -55,6 +55,8 @@ PLANT_PARAMS = ParamTable('plant_simulator', [
           'which the thrusters are commanded to zero (tilts held) until commands return; '
           '0: off', 's', low=0.0, high=3600.0),
 ])
+#: Parameters whose defaults are the scenario's (declared once the scenario is known).
+_FROM_SCENARIO = ('com_error', 'current')
 
 
 @dataclass(frozen=True)
@@ -88,19 +90,20 @@ class PlantConfig:
 
 def declare_parameters(node: TiltrovNode) -> PlantConfig:
     """Declare the plant's parameters on ``node`` and return them validated."""
-    declared = declare(node, PLANT_PARAMS)
+    first = [name for name in PLANT_PARAMS.names if name not in _FROM_SCENARIO]
+    declared = declare(node, PLANT_PARAMS, only=first)
+    scenario_name = check(PLANT_PARAMS, {'scenario': declared['scenario']})['scenario']
+    scenario: Scenario | None = load_scenario(scenario_name) if scenario_name else None
+    disturbances = scenario.disturbances if scenario is not None else Disturbances()
+    declared.update(declare(node, PLANT_PARAMS, only=_FROM_SCENARIO, defaults={
+        'com_error': disturbances.com_error, 'current': disturbances.current}))
     failed = declare_failed_thrusters(node)
     node.declare_stamp_bounds()
     robot, period = declare_robot(node)
     node.check_overrides()
 
     v = check(PLANT_PARAMS, declared)
-    scenario: Scenario | None = load_scenario(v['scenario']) if v['scenario'] else None
-    disturbances = scenario.disturbances if scenario is not None else Disturbances()
-    if v['com_error'] is not None:
-        disturbances = replace(disturbances, com_error=v['com_error'])
-    if v['current'] is not None:
-        disturbances = replace(disturbances, current=v['current'])
+    disturbances = replace(disturbances, com_error=v['com_error'], current=v['current'])
     step_ns = to_ns(v['step_size'])
     period_ns = to_ns(period)
     if period_ns % step_ns:
