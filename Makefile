@@ -12,12 +12,18 @@ OUT    ?= runs/demo
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export MPLBACKEND ?= Agg
 
-.PHONY: install demo test lint typecheck bench soak figures docs clean help
+.PHONY: install ros2-cli demo test lint typecheck bench soak figures docs clean help
+
+# The real ros2 command line (ros2cli, launch, launch_ros as wheels, with an install.sh)
+# for the tests that drive the package as a ROS user does: installed into .venv by
+# `make ros2-cli` when the folder exists (relative paths: from this directory).
+TILTROV_ROS2_CLI ?= ../shared/ros2-cli
 
 help:
 	@echo "make demo     run the full stack on the paper's positioning scenario (bag, figures, metrics)"
 	@echo "make test     lint, type-check and run the whole test suite"
 	@echo "make install  create .venv with rclpy (ROS 2 Jazzy wheels) and this package"
+	@echo "make ros2-cli add the ros2 command line to .venv (from TILTROV_ROS2_CLI, if present)"
 	@echo "make bench    benchmarks (speed ratios against baselines measured in the same run)"
 	@echo "make soak     one hour of simulated time in lockstep (not part of make test)"
 	@echo "make figures  regenerate the results page (docs/results.md) and its figures"
@@ -34,11 +40,18 @@ $(STAMP): setup.py setup.cfg package.xml requirements/ros-jazzy.txt requirements
 	@touch $(VENV)/COLCON_IGNORE
 	@touch $(STAMP)
 
+ros2-cli: $(STAMP)
+	@if [ -x "$(TILTROV_ROS2_CLI)/install.sh" ]; then \
+		"$(TILTROV_ROS2_CLI)/install.sh" $(VENV); \
+	else \
+		echo "no ros2 command line at TILTROV_ROS2_CLI=$(TILTROV_ROS2_CLI): the tests with the real ros2 are skipped"; \
+	fi
+
 demo: $(STAMP)
 	$(VENV)/bin/tiltrov demo --out $(OUT)
 
 lint: $(STAMP)
-	$(VENV)/bin/ruff check tiltrov_ros test bench
+	$(VENV)/bin/ruff check tiltrov_ros test bench launch
 	$(VENV)/bin/mypy
 
 # Tests run derandomized (the same Hypothesis examples every run): see test/conftest.py.

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from rclpy.parameter import Parameter
 import pytest
+from rclpy.parameter import Parameter
 
 from tiltrov_ros.core.scenarios import load_scenario
 from tiltrov_ros.nodes.bag_recorder import BagRecorder

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 import os
+import signal
 import sys
 
 import rclpy
@@ -77,7 +79,8 @@ def main_loop(factory: Callable[[], TiltrovNode], args: list[str] | None, name: 
     run); ``before_exit`` runs after a normal end (flush deliveries). A start-up
     error (an invalid parameter, a wrong-type YAML value) is printed as one line
     naming the node and gives exit code 1; Ctrl-C (the context shut down by
-    rclpy's signal handler) gives 0.
+    rclpy's signal handler) gives 0, also when a second SIGINT comes during the
+    clean-up.
     """
     rclpy.init(args=args)
     context = rclpy.get_default_context()
@@ -107,9 +110,29 @@ def main_loop(factory: Callable[[], TiltrovNode], args: list[str] | None, name: 
         print(f'{name}: {text}', file=sys.stderr, flush=True)
         code = 1
     finally:
-        if executor is not None:
-            executor.shutdown()
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+        # As a program (args None) the process ends next: SIGINT stays ignored.
+        with _sigint_ignored(restore=args is not None):
+            if executor is not None:
+                executor.shutdown()
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
     return code
+
+
+@contextmanager
+def _sigint_ignored(*, restore: bool) -> Iterator[None]:
+    """SIGINT ignored while the node is taken down (and after, unless ``restore``):
+    Ctrl-C in a terminal reaches every process of ``ros2 launch`` and launch sends
+    its own SIGINT too, and the second one must not break the clean-up the first
+    one started (a KeyboardInterrupt traceback, a death by signal: exit code -2)."""
+    try:
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except ValueError:          # not the main thread: signals are not ours to set
+        yield
+        return
+    try:
+        yield
+    finally:
+        if restore:
+            signal.signal(signal.SIGINT, previous)

@@ -61,6 +61,7 @@ class LaunchOptions:
     executor: str | None = None            # None: TILTROV_EXECUTOR or 'events'
     respawn: tuple[str, ...] = ()          # node names started again when they die
     status_file: Path | None = None        # the launch's state as JSON (StatusFile)
+    launcher: str = 'tiltrov launch'       # what started the run (the bag's run_info)
 
 
 @dataclass(frozen=True)
@@ -197,7 +198,7 @@ def run_info(options: LaunchOptions, config: StackConfig, duration: float) -> di
     """What the recorder stores about the run (bag metadata)."""
     info = config.describe()
     info.update(duration=duration, mode=LOCKSTEP if options.lockstep else REALTIME,
-                namespace=normalize_namespace(options.namespace), launcher='tiltrov launch')
+                namespace=normalize_namespace(options.namespace), launcher=options.launcher)
     if not options.lockstep:
         info['real_time_factor'] = options.real_time_factor
     return info

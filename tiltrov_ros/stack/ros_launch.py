@@ -1,0 +1,150 @@
+"""``ros2 launch tiltrov_ros tiltrov.launch.py``: the stack of ``tiltrov launch`` as
+launch_ros ``Node`` actions, for a ROS 2 install.
+
+The nodes, their parameter files and overrides are :func:`.specs.stack_specs`'
+(the one place that knows the wiring), so in lockstep the run gives the
+numbers of ``tiltrov launch`` and ``tiltrov sim``. Arguments::
+
+    scenario:=pitch_hold  controller:=pd|switching|pid  allocator:=robust|paper
+    mode:=lockstep|realtime  real_time_factor:=1.0  duration:=SEC
+    namespace:=NS  record:=DIR
+
+The run ends as ``tiltrov launch`` ends it: when the plant reaches
+``duration`` it exits (code 0), the other nodes are stopped (SIGINT), then the
+recorder, which closes its bag; then the launch ends with code 0. A node that
+exits otherwise (an error, a crash) ends the launch with code 1 and a line
+naming it. Ctrl-C stops every node cleanly (exit code 0 each).
+
+Imported only by the launch file: ``launch`` and ``launch_ros`` come with ROS
+(or the ros2 command line), not with this package's requirements.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+import shutil
+import tempfile
+from typing import Any
+
+from launch import LaunchContext, LaunchDescription
+from launch.actions import (
+    DeclareLaunchArgument,
+    EmitEvent,
+    OpaqueFunction,
+    RegisterEventHandler,
+)
+from launch.event_handlers import OnProcessExit, OnShutdown
+from launch.events import Shutdown
+from launch.events.process import ProcessExited, ShutdownProcess
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+
+from tiltrov_ros.core.names import LOCKSTEP, MODES, PLANT, RECORDER, normalize_namespace
+
+from .specs import LaunchError, LaunchOptions, NodeSpec, namespaced_config, stack_specs
+from .supervisor import RECORDER_STOP_TIMEOUT
+
+PACKAGE = 'tiltrov_ros'
+
+#: name -> (default, description) of the launch arguments.
+ARGUMENTS = {
+    'scenario': ('pitch_hold', 'scenario name (config/scenarios) or path of a scenario file'),
+    'controller': ('', "pd, switching or pid; empty: config/wrench_controller.yaml's"),
+    'allocator': ('', "robust or paper; empty: config/thrust_allocator.yaml's"),
+    'mode': (LOCKSTEP, 'lockstep (deterministic, as fast as possible) or realtime'),
+    'real_time_factor': ('1.0', 'realtime mode: sim seconds per wall second'),
+    'duration': ('', "sim seconds to run; empty: the scenario's"),
+    'namespace': ('', 'namespace pushed on every node and relative topic'),
+    'record': ('', 'bag directory to record every topic into (must not exist); empty: none'),
+}
+
+
+def generate_launch_description() -> LaunchDescription:
+    """The launch arguments and the stack they describe."""
+    declared = [DeclareLaunchArgument(name, default_value=default, description=text)
+                for name, (default, text) in ARGUMENTS.items()]
+    return LaunchDescription([*declared, OpaqueFunction(function=_stack)])
+
+
+def options_from(values: dict[str, str]) -> LaunchOptions:
+    """The :class:`LaunchOptions` of the launch arguments' values (strings)."""
+    mode = values['mode']
+    if mode not in MODES:
+        raise LaunchError(f'mode:={mode!r}: allowed: {" or ".join(MODES)}')
+    try:
+        duration = float(values['duration']) if values['duration'] else None
+        factor = float(values['real_time_factor'])
+    except ValueError as exc:
+        raise LaunchError(f'duration and real_time_factor are numbers: {exc}') from None
+    if factor <= 0:
+        raise LaunchError(f'real_time_factor:={factor:g}: must be > 0')
+    return LaunchOptions(
+        scenario=values['scenario'], controller=values['controller'] or None,
+        allocator=values['allocator'] or None, duration=duration, lockstep=mode == LOCKSTEP,
+        real_time_factor=factor, record=Path(values['record']) if values['record'] else None,
+        namespace=values['namespace'], launcher='ros2 launch')
+
+
+def _stack(context: LaunchContext) -> list[Any]:
+    values = {name: LaunchConfiguration(name).perform(context) for name in ARGUMENTS}
+    options = options_from(values)
+    specs, _, _ = stack_specs(options)
+    namespace = normalize_namespace(options.namespace)
+    actions: list[Any] = []
+    if namespace:
+        # The shipped files' node sections name the nodes without a namespace.
+        workdir = Path(tempfile.mkdtemp(prefix='tiltrov_launch_'))
+        namespaced_config(specs, namespace, workdir)
+        specs, _, _ = stack_specs(options, config_dir=workdir)
+        actions.append(RegisterEventHandler(OnShutdown(
+            on_shutdown=lambda *_: shutil.rmtree(workdir, ignore_errors=True))))
+    nodes = {spec.name: _node(spec, namespace) for spec in specs}
+    watcher = _EndOfRun(nodes)
+    actions += list(nodes.values())
+    actions += [RegisterEventHandler(OnProcessExit(target_action=node, on_exit=watcher.exited))
+                for node in nodes.values()]
+    return actions
+
+
+def _node(spec: NodeSpec, namespace: str) -> Node:
+    extra = {'sigterm_timeout': str(RECORDER_STOP_TIMEOUT)} if spec.name == RECORDER else {}
+    return Node(package=PACKAGE, executable=spec.name, name=spec.name,
+                namespace=namespace or None, output='screen',
+                parameters=[*(str(path) for path in spec.params_files), spec.all_overrides()],
+                **extra)
+
+
+class _EndOfRun:
+    """Ends the launch when the plant has finished the run (see the module docstring)."""
+
+    def __init__(self, nodes: dict[str, Node]) -> None:
+        self.nodes = nodes
+        self.names = {id(node): name for name, node in nodes.items()}
+        self.running = set(nodes)
+        self.finished = False
+
+    def _stop(self, names: list[str]) -> list[Any]:
+        return [EmitEvent(event=ShutdownProcess(process_matcher=_is(self.nodes[name])))
+                for name in names]
+
+    def exited(self, event: ProcessExited, context: LaunchContext) -> list[Any] | None:
+        name = self.names.get(id(event.action), '?')
+        self.running.discard(name)
+        if context.is_shutdown:
+            return None
+        if event.returncode != 0:
+            raise LaunchError(f'{name} exited with code {event.returncode}')
+        if name == PLANT:
+            self.finished = True
+            return self._stop(sorted(self.running - {RECORDER}))
+        if not self.finished:
+            raise LaunchError(f'{name} exited before the end of the run')
+        if self.running - {RECORDER}:
+            return None
+        if RECORDER in self.running:
+            return self._stop([RECORDER])
+        return [EmitEvent(event=Shutdown(reason='end of the run'))]
+
+
+def _is(node: Node) -> Any:
+    return lambda action: action is node
