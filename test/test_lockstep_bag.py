@@ -77,6 +77,29 @@ def test_analyze_of_a_lockstep_bag_gives_the_metrics_of_tiltrov_sim(
 
 
 @pytest.mark.slow
+def test_every_node_stamps_its_diagnostics_on_the_sim_time_it_runs_on(
+        lockstep_bags: dict[str, Path]) -> None:
+    """The plant on its own sim time, the others on /clock: one time axis in the bag,
+    going forward for each node (not wall time for one node and sim time for the rest)."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.serialization import deserialize_message
+
+    stamps: dict[str, list[int]] = {}
+    for raw in iter_raw(lockstep_bags['pd'], ['/diagnostics']):
+        msg = deserialize_message(raw.data, DiagnosticArray)
+        for status in msg.status:
+            stamps.setdefault(status.name, []).append(
+                msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec)
+    assert {'/plant_simulator', '/wrench_controller', '/thrust_allocator',
+            '/reference_publisher'} <= set(stamps)
+    end = to_ns(float(DURATION))
+    for name, values in stamps.items():
+        assert all(0 <= ns <= end for ns in values), (name, values)
+        assert values == sorted(values), name
+    assert stamps['/plant_simulator'][-1] == end      # the final counts, at the end
+
+
+@pytest.mark.slow
 @pytest.mark.parametrize('controller', CONTROLLERS)
 def test_offline_allocator_reproduces_the_lockstep_recording(
         lockstep_bags: dict[str, Path], controller: str) -> None:

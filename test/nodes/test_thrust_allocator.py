@@ -168,6 +168,31 @@ def test_diagnostics_count_feasible_infeasible_and_saturated(rig) -> None:
     assert status().level == b'\x01'
 
 
+def test_hovering_is_ok_and_quiet_and_a_real_shortfall_warns(rig) -> None:
+    """Hovering with a small sideways correction: the robust mode gives up 1.6 mN
+    of X for less servo motion (not exact, but far below wrench_tolerance: no log, no
+    WARN, nothing counted per component); a 5 N surge from the hover attitude is
+    short by 4.5 N at the servo rate: counted, WARN."""
+    ros, _, probe, pub = rig
+    node = _allocator(ros)
+    np.testing.assert_allclose(node.tolerances, [0.4, 0.4, 0.4, 0.08, 0.08, 0.08])
+    assert ros.spin_until(lambda: pub.get_subscription_count() > 0)
+    hover = [0.0, 0.0, 5.0, 0.0, 0.0, 0.0]
+    for i, values in enumerate([hover, [0.0, 0.05, 5.0, 0.0, 0.0, 0.0], hover]):
+        pub.publish(wrench(i * TICK, values))
+    assert ros.spin_until(_answered(probe, 3))
+    assert node.infeasible >= 1 and node.short == 0 and not node.unachieved
+    level, message, values = node.diagnostic_status()
+    assert level == 0 and '(0 short beyond tolerance)' in message
+
+    pub.publish(wrench(3 * TICK, [5.0, 0.0, 5.0, 0.0, 0.0, 0.0]))
+    assert ros.spin_until(_answered(probe, 4))
+    assert node.short == 1 and dict(node.unachieved) == {'X': 1}
+    assert node.last_shortfall[0] > 4.0
+    assert node.diagnostic_status()[0] == 1        # WARN: short since the last report
+    assert node.diagnostic_status()[0] == 0        # ... and OK again once reported
+
+
 def test_run_time_parameters_are_validated(rig) -> None:
     ros, _, _, _ = rig
     node = _allocator(ros)

@@ -30,7 +30,7 @@ from tiltrov_ros.core.paramtable import Param, ParamTable
 from tiltrov_ros.core.timebase import NS_PER_S
 from tiltrov_ros.core.validation import InvalidInput, StampBounds
 
-from .conversions import message_is_finite
+from .conversions import message_is_finite, set_stamp
 from .parameters import (
     Overrides,
     allowed_text,
@@ -268,6 +268,12 @@ class TiltrovNode(Node):
         """Called when a callback raised; subclasses publish a safe command too."""
         self.get_logger().error(f'{callback} failed: {exc!r}', throttle_duration_sec=THROTTLE)
 
+    def diagnostics_stamp_ns(self) -> int:
+        """The stamp of this node's /diagnostics: the clock it runs on (sim time on
+        /clock with ``use_sim_time``, else system time); the plant overrides it with
+        its own sim time."""
+        return int(self.get_clock().now().nanoseconds)
+
     def on_rejected(self, topic: str, bad: InvalidInput, stamp: int | None) -> None:
         """Called after a message of ``topic`` was rejected; ``stamp`` is its stamp (ns)
         when the stamp itself was valid, else None. Subclasses answer a rejected
@@ -459,7 +465,7 @@ class TiltrovNode(Node):
             message=message, hardware_id='tiltrov',
             values=[KeyValue(key=str(k), value=_text(v)) for k, v in values.items()])
         msg = self._diagnostics_msg
-        msg.header.stamp = self.get_clock().now().to_msg()
+        set_stamp(msg.header.stamp, self.diagnostics_stamp_ns())
         msg.status = [status]
         if self._diagnostics_pub is not None:
             self._diagnostics_pub.publish(msg)

@@ -4,8 +4,12 @@ Subscribes ``thrust_cmd`` (thruster_1..4, effort N) and ``tilt_cmd``
 (tilt_front, tilt_rear, position rad) and hands them to the actuator models
 (``Plant.command``); publishes at every plant step, stamped with the sim time
 t_i in integer ns (the first message is the initial state at t = 0):
-``odom``, then ``joint_states``, then ``/clock`` (so whoever sees the clock at
-t_i knows the state at t_i is out).
+``/clock``, then ``joint_states``, then ``odom``. The clock first: a node on
+sim time has its clock at t_i when the state stamped t_i arrives (its stamp
+checks and a recorder's log times are then exact, docs/bags.md), the
+reference publisher answers the clock while the state is on its way, and the
+allocator has the measured tilts at t_i before the wrench that answers the
+``odom`` at t_i.
 
 Modes (parameter ``mode``):
 
@@ -156,18 +160,18 @@ class PlantSimulator(TiltrovNode):
     # -- state out -----------------------------------------------------------------
 
     def _publish_state(self) -> None:
-        """``odom`` (first: the controller's input), ``joint_states``, then ``/clock``."""
+        """``/clock``, ``joint_states``, then ``odom`` (see the module docstring)."""
         s = self.plant.sample()
         ns = s.t_ns
-        self._odom_pub.publish(fill_odometry(self._odom_msg, ns, s.position, s.quaternion,
-                                             s.nu))
+        set_stamp(self._clock_msg.clock, ns)
+        self._clock_pub.publish(self._clock_msg)
         fill_joint_state(self._joint_msg, ns,
                          position=(*s.tilts, NO_VALUE, NO_VALUE, NO_VALUE, NO_VALUE),
                          velocity=(*s.tilt_velocities, NO_VALUE, NO_VALUE, NO_VALUE, NO_VALUE),
                          effort=(NO_VALUE, NO_VALUE, *s.thrusts))
         self._joint_pub.publish(self._joint_msg)
-        set_stamp(self._clock_msg.clock, ns)
-        self._clock_pub.publish(self._clock_msg)
+        self._odom_pub.publish(fill_odometry(self._odom_msg, ns, s.position, s.quaternion,
+                                             s.nu))
 
     def _reached_end(self) -> bool:
         end = self.config.duration_ns
@@ -187,6 +191,10 @@ class PlantSimulator(TiltrovNode):
 
     def clock_ns(self) -> int | None:
         """The plant's clock is its own sim time (stamp bounds are relative to it)."""
+        return self.plant.time_ns
+
+    def diagnostics_stamp_ns(self) -> int:
+        """The plant runs on its own sim time: its /diagnostics are stamped with it."""
         return self.plant.time_ns
 
     @input_callback(THRUST_CMD)

@@ -39,9 +39,11 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
 from tiltrov_ros.core.allocation import (
+    SHORTFALL_FRACTION,
     AllocationResult,
     AllocatorConfig,
     load_allocator_config,
+    shortfall_tolerances,
 )
 from tiltrov_ros.core.errors import ParameterError
 from tiltrov_ros.core.names import (
@@ -114,6 +116,10 @@ ALLOCATOR_PARAMS = ParamTable('thrust_allocator', [
           'control period while the newest valid wrench_cmd is older than this; on sim time '
           'measured on /clock, else wall time since the message arrived; 0: off', 's',
           low=0.0, high=3600.0),
+    Param('wrench_tolerance', 'float', SHORTFALL_FRACTION, 'a wrench component missing by '
+          'more than this fraction of max_thrust (forces; moments: times min(length, width) / '
+          '2) counts as not achieved: logged, counted per component, WARN on /diagnostics',
+          '-', low=0.0, high=1.0),
     Param('scenario', 'str', '', 'scenario name or path whose faults (thruster failures) the '
           'allocator is told of at their time + detected_after, by the wrench stamps; empty: '
           'none', read_only=True),
@@ -184,9 +190,12 @@ class ThrustAllocatorNode(TiltrovNode):
             self, WRENCH_CMD, 'wrench_timeout',
             'commanding zero thrust until a fresh one comes', 'allocation resumes')
         self.watchdog_outputs = 0
-        #: Ticks at which each wrench component was not achieved; the last shortfall.
+        #: Ticks short of the wrench beyond ``wrench_tolerance``, in all and per
+        #: component; the last such shortfall; ticks short at the last /diagnostics.
+        self.short = 0
         self.unachieved: Counter[str] = Counter()
         self.last_shortfall = np.zeros(6)
+        self._short_reported = 0
         self.create_timer(self.control_period, self._wrench_watchdog, clock=self.steady)
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
@@ -202,7 +211,7 @@ class ThrustAllocatorNode(TiltrovNode):
         shipped = load_allocator_config()
         declare(self, ALLOCATION, defaults=asdict(shipped))
         own = declare(self, ALLOCATOR_PARAMS, only=('tilt_request', 'input_timeout',
-                                                  'wrench_timeout'))
+                                                  'wrench_timeout', 'wrench_tolerance'))
         self.failed_param = declare_failed_thrusters(self)
         own.update(declare(self, ALLOCATOR_PARAMS, only=('scenario',)))
         self.scenario_faults: tuple[ThrusterFault, ...] = (
@@ -214,6 +223,7 @@ class ThrustAllocatorNode(TiltrovNode):
         self.tilt_request_mode = own['tilt_request']
         self.input_timeout = own['input_timeout']
         self.wrench_timeout = own['wrench_timeout']
+        self.tolerances = shortfall_tolerances(self.robot, own['wrench_tolerance'])
         self.allocator_config = AllocatorConfig.from_mapping(
             {key: self.get_parameter(key).value for key in ALLOCATION.names})
 
@@ -236,6 +246,8 @@ class ThrustAllocatorNode(TiltrovNode):
         for p in parameters:
             if p.name == 'wrench_timeout':
                 self.wrench_timeout = float(p.value)
+            elif p.name == 'wrench_tolerance':
+                self.tolerances = shortfall_tolerances(self.robot, float(p.value))
             elif p.name == 'failed_thrusters':
                 self.failed_param = failed_thruster_indices(p.value)
                 self._use_failed(self._wanted_failed(self._last_ns if self._last_ns >= 0
@@ -356,7 +368,7 @@ class ThrustAllocatorNode(TiltrovNode):
         if result.feasible:
             self.feasible += 1
         else:
-            self.infeasible += 1
+            self.infeasible += 1        # not exact: the core's test, for the counts
             self._report_shortfall(ns, wrench, np.asarray(result.achieved, dtype=float))
         limit = self.robot.max_thrust * (1.0 - 1e-9)
         if np.any(np.abs(result.thrusts) >= limit):
@@ -438,10 +450,14 @@ class ThrustAllocatorNode(TiltrovNode):
         self._answer_safe(ns)
 
     def _report_shortfall(self, ns: int, wrench: FloatArray, achieved: FloatArray) -> None:
-        """Count and log (throttled) the components of ``wrench`` not achieved."""
+        """Count and log (throttled) the components of ``wrench`` short by more than
+        their tolerance (``wrench_tolerance``); a smaller shortfall is not reported."""
         shortfall = wrench - achieved
-        tol = 1e-6 * max(float(np.linalg.norm(wrench)), self.robot.max_thrust)
-        missed = [dof for dof, v in zip(WRENCH_DOFS, shortfall) if abs(v) > tol]
+        missed = [dof for dof, v, tol in zip(WRENCH_DOFS, shortfall, self.tolerances)
+                  if abs(v) > tol]
+        if not missed:
+            return
+        self.short += 1
         self.unachieved.update(missed)
         self.last_shortfall = shortfall
         self.get_logger().warning(
@@ -472,9 +488,11 @@ class ThrustAllocatorNode(TiltrovNode):
     def diagnostic_status(self) -> tuple[int, str, dict[str, Any]]:
         level = OK
         message = (f'{self.allocator_config.mode}: {self.feasible} feasible, '
-                   f'{self.infeasible} infeasible, {self.saturated} saturated')
-        if self.infeasible or self.stale_requests:
-            level = WARN
+                   f'{self.infeasible} infeasible ({self.short} short beyond tolerance), '
+                   f'{self.saturated} saturated')
+        if self.short > self._short_reported or self.stale_requests:
+            level = WARN            # short of the wrench since the last report
+        self._short_reported = self.short
         if self.failed:
             message += f'; failed: {thruster_names(self.failed)}'
             if self.unachieved:
@@ -488,7 +506,8 @@ class ThrustAllocatorNode(TiltrovNode):
         last = self.previous
         return level, message, {
             'mode': self.allocator_config.mode, 'ticks': self.ticks,
-            'feasible': self.feasible, 'infeasible': self.infeasible,
+            'feasible': self.feasible, 'infeasible': self.infeasible, 'short': self.short,
+            'tolerances': [float(v) for v in self.tolerances],
             'saturated': self.saturated, 'max_weighted_error': self.max_error,
             'methods': dict(self.methods), 'republished': self.republished,
             'stale_tilt_requests': self.stale_requests,
