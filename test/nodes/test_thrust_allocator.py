@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 import math
 from pathlib import Path
 
@@ -48,8 +49,9 @@ def _allocator(ros, **overrides) -> ThrustAllocatorNode:
     return ros.add(ThrustAllocatorNode(context=ros.context, parameter_overrides=overrides))
 
 
-def _core():
-    return load_allocator_config().build(load_robot_params(), 0.05)
+def _core(**changes):
+    """The core allocator of the shipped configuration, with ``changes`` to it."""
+    return replace(load_allocator_config(), **changes).build(load_robot_params(), 0.05)
 
 
 def _answered(probe: Probe, n: int):
@@ -402,3 +404,37 @@ def test_wait_for_recorder_holds_the_answers_until_the_recorder_reads_every_topi
     np.testing.assert_array_equal(effort_rows(probe['thrust_cmd'])[0], r1.thrusts)
     pub.publish(wrench(2 * TICK, W1))                # no longer held
     assert ros.spin_until(_answered(probe, 3))
+
+
+def test_measured_tilts_from_joint_states_are_the_starting_point(rig) -> None:
+    """tilt_source measured: the servos lag their commands, so the next allocation
+    starts (and moves at most max_tilt_step) from the tilts joint_states reports, the
+    one with the wrench's stamp, else the latest before it."""
+    from tiltrov_ros.core.allocation import from_tilts
+
+    ros, node, probe, pub = rig
+    step = 0.05
+    alloc = _allocator(ros, tilt_source='measured', max_tilt_step=step)
+    joints = node.create_publisher(JointState, 'joint_states', KEEP_ALL)
+    assert ros.spin_until(lambda: pub.get_subscription_count() > 0
+                          and joints.get_subscription_count() > 0)
+    measured = (0.3, -0.2)
+    joints.publish(joint_state(0, ['tilt_front', 'tilt_rear', 'thruster_1', 'thruster_2',
+                                   'thruster_3', 'thruster_4'],
+                               position=[*measured, 0.0, 0.0, 0.0, 0.0]))
+    assert ros.spin_until(lambda: alloc._latest_measured is not None)
+    pub.publish(wrench(0, W1))
+    assert ros.spin_until(_answered(probe, 1))
+    pub.publish(wrench(TICK, W2))               # no joint_states at TICK: the latest
+    assert ros.spin_until(_answered(probe, 2))
+
+    core = _core(max_tilt_step=step)
+    r1 = core.allocate(np.array(W1), previous=from_tilts(None, measured))
+    r2 = core.allocate(np.array(W2), previous=from_tilts(r1, measured))
+    got = [tuple(m.position) for m in probe['tilt_cmd']]
+    assert got == [(r1.tilt_front, r1.tilt_rear), (r2.tilt_front, r2.tilt_rear)]
+    assert all(abs(a - m) <= step + 1e-12 for tilts in got for a, m in zip(tilts, measured))
+    commanded = core.allocate(np.array(W2), previous=r1)
+    assert (commanded.tilt_front, commanded.tilt_rear) != got[1]
+    assert alloc.measured_late == 1
+    assert alloc.diagnostic_status()[2]['tilt_source'] == 'measured'

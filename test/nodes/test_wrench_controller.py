@@ -333,3 +333,27 @@ def test_odom_watchdog_zero_wrench_when_stale_and_recovery(ros) -> None:
     ros.spin_for(0.15)
     assert len(probe['wrench_cmd']) == count and finite_outputs(probe)
     assert report(ros, probe, controller)['odom_stale'] == 'False'
+
+
+def test_enu_flu_odometry_is_converted_at_the_boundary(rig) -> None:
+    """odom_frame_convention: enu: the controller takes REP-105 odometry (odom ->
+    base_link, FLU twist) and computes the wrench of the same state in NED/FRD; NED
+    frames are then refused."""
+    from tiltrov_ros.core.frames import ned_to_enu
+
+    ros, probe, send, ready = rig
+    node = _controller(ros, mode='lockstep', odom_frame_convention='enu')
+    assert ros.spin_until(ready)
+    position, quaternion, nu = ned_to_enu(POSITION, QUATERNION, NU)
+    enu = odometry(0, list(position), list(quaternion), list(nu))
+    enu.header.frame_id, enu.child_frame_id = 'odom', 'base_link'
+    send('velocity', 0)
+    send('setpoint', 0)
+    next(p for p in ros.nodes[0].publishers if p.topic_name == '/odom').publish(enu)
+    assert ros.spin_until(lambda: len(probe['wrench_cmd']) == 1)
+    _, expected = _expected('pd')
+    np.testing.assert_allclose(wrench_rows(probe['wrench_cmd'])[0], expected.wrench,
+                               rtol=0, atol=1e-9)
+    send('odom', TICK)                          # odom_ned: not this node's convention
+    assert ros.spin_until(lambda: node.rejected_messages == 1)
+    assert list(node.rejections) == [('odom', 'wrong_frame')]

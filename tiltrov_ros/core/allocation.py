@@ -247,6 +247,17 @@ def shortfall_tolerances(robot: RobotParams, fraction: float = SHORTFALL_FRACTIO
     return np.array([force] * 3 + [moment] * 3)
 
 
+def from_tilts(previous: AllocationResult | None, tilts: Sequence[float]) -> AllocationResult:
+    """``previous`` with its tilts replaced by ``tilts`` (the servos' measured angles):
+    the next allocation then moves the tilts least, and at most ``max_tilt_step``,
+    from where the servos are rather than from where they were told to go (the
+    paper: the servos "could not follow the change of the tilting angle exactly").
+    The robust mode's state (method, target, stuck) is kept."""
+    if previous is None:
+        return _tilts_only(np.array([float(tilts[0]), float(tilts[1])]))
+    return replace(previous, tilt_front=float(tilts[0]), tilt_rear=float(tilts[1]))
+
+
 def infeasible_rows(requested: ArrayLike, achieved: ArrayLike, max_thrust: float) -> BoolArray:
     """The allocator's feasibility test, row by row, negated: True where
     ||achieved - requested|| > FEASIBILITY_RTOL * max(||requested||, max_thrust).

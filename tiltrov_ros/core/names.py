@@ -15,6 +15,9 @@ from __future__ import annotations
 #: Earth frame, NED (Fossen; the paper), and body frame, FRD.
 FRAME_EARTH = 'odom_ned'
 FRAME_BODY = 'base_link_frd'
+#: Their ENU/FLU siblings (REP-103, REP-105), as a robot's state estimator names them.
+FRAME_EARTH_ENU = 'odom'
+FRAME_BODY_FLU = 'base_link'
 
 # --------------------------------------------------------------------------- joints
 

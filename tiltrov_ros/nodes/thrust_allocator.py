@@ -42,6 +42,7 @@ from tiltrov_ros.core.allocation import (
     SHORTFALL_FRACTION,
     AllocationResult,
     AllocatorConfig,
+    from_tilts,
     load_allocator_config,
     shortfall_tolerances,
 )
@@ -50,6 +51,7 @@ from tiltrov_ros.core.names import (
     ALLOCATOR,
     ALLOCATOR_MODES,
     FRAME_BODY,
+    JOINT_STATES,
     THRUST_CMD,
     THRUSTERS,
     TILT_CMD,
@@ -88,6 +90,8 @@ from .qos import PUBLISHER_QOS, RELIABLE_QOS
 from .watchdog import InputWatchdog
 
 TILT_REQUEST_MODES = ('auto', 'required', 'ignored')
+#: Where an allocation starts from: the last commanded tilts, or the measured ones.
+TILT_SOURCES = ('commanded', 'measured')
 #: s (wall): how often a wrench waiting for its tilt request is looked at.
 WATCHDOG_PERIOD = 0.1
 BUFFER = 200
@@ -116,6 +120,10 @@ ALLOCATOR_PARAMS = ParamTable('thrust_allocator', [
           'control period while the newest valid wrench_cmd is older than this; on sim time '
           'measured on /clock, else wall time since the message arrived; 0: off', 's',
           low=0.0, high=3600.0),
+    Param('tilt_source', 'str', 'commanded', 'tilts each allocation starts from (and moves '
+          'at most max_tilt_step away from): commanded, the last answer; measured, the '
+          'servos\' positions in joint_states (the one stamped with the wrench, else the '
+          'latest before it)', choices=TILT_SOURCES, read_only=True),
     Param('wrench_tolerance', 'float', SHORTFALL_FRACTION, 'a wrench component missing by '
           'more than this fraction of max_thrust (forces; moments: times min(length, width) / '
           '2) counts as not achieved: logged, counted per component, WARN on /diagnostics',
@@ -165,6 +173,14 @@ class ThrustAllocatorNode(TiltrovNode):
             self.create_subscription(JointState, TILT_REQUEST, self._on_tilt_request,
                                      RELIABLE_QOS)
             self.create_timer(WATCHDOG_PERIOD, self._watchdog, clock=self.steady)
+        #: tilt_source measured: joint_states tilts by stamp; the last received; wrenches
+        #: that started from an earlier measurement than their own stamp, or from none.
+        self._measured: dict[int, tuple[float, float]] = {}
+        self._latest_measured: tuple[int, tuple[float, float]] | None = None
+        self.measured_late = 0
+        if self.measured_tilts:
+            self.create_subscription(JointState, JOINT_STATES, self._on_joint_states,
+                                     RELIABLE_QOS)
 
         self.previous: AllocationResult | None = None
         self._last_ns = -1
@@ -211,7 +227,8 @@ class ThrustAllocatorNode(TiltrovNode):
         shipped = load_allocator_config()
         declare(self, ALLOCATION, defaults=asdict(shipped))
         own = declare(self, ALLOCATOR_PARAMS, only=('tilt_request', 'input_timeout',
-                                                  'wrench_timeout', 'wrench_tolerance'))
+                                                  'wrench_timeout', 'wrench_tolerance',
+                                                  'tilt_source'))
         self.failed_param = declare_failed_thrusters(self)
         own.update(declare(self, ALLOCATOR_PARAMS, only=('scenario',)))
         self.scenario_faults: tuple[ThrusterFault, ...] = (
@@ -224,6 +241,7 @@ class ThrustAllocatorNode(TiltrovNode):
         self.input_timeout = own['input_timeout']
         self.wrench_timeout = own['wrench_timeout']
         self.tolerances = shortfall_tolerances(self.robot, own['wrench_tolerance'])
+        self.measured_tilts = own['tilt_source'] == 'measured'
         self.allocator_config = AllocatorConfig.from_mapping(
             {key: self.get_parameter(key).value for key in ALLOCATION.names})
 
@@ -336,6 +354,32 @@ class ThrustAllocatorNode(TiltrovNode):
         if waiting is not None and waiting.ns == ns:
             self._allocate(ns, waiting.wrench, request)
 
+    @input_callback(JOINT_STATES)
+    def _on_joint_states(self, msg: JointState) -> None:
+        """tilt_source measured: keep the servo positions by stamp (other joints of the
+        message, e.g. the thrusters, are allowed and ignored)."""
+        ns = self.check_header(msg.header, None)
+        front, rear = joint_state_values(msg, TILTS, 'position', allowed=list(msg.name))
+        self._measured[ns] = (front, rear)
+        self._latest_measured = (ns, (front, rear))
+        if len(self._measured) > BUFFER:
+            for stamp in sorted(self._measured)[:len(self._measured) - BUFFER]:
+                del self._measured[stamp]
+
+    def _start(self, ns: int) -> AllocationResult | None:
+        """What the allocation of the wrench stamped ``ns`` starts from: the last answer,
+        or with tilt_source measured its tilts replaced by the measured ones."""
+        if not self.measured_tilts:
+            return self.previous
+        tilts = self._measured.get(ns)
+        if tilts is None:
+            self.measured_late += 1
+            latest = self._latest_measured
+            if latest is None or latest[0] > ns:
+                return self.previous
+            tilts = latest[1]
+        return from_tilts(self.previous, tilts)
+
     @guarded
     def _watchdog(self) -> None:
         waiting = self._waiting
@@ -357,11 +401,12 @@ class ThrustAllocatorNode(TiltrovNode):
         self._waiting = None
         if self.scenario_faults:
             self._use_failed(self._wanted_failed(ns), f'at {format_ns(ns)} (scenario)')
+        start = self._start(ns)
         if request is None:
-            result = self.allocator.allocate(wrench, previous=self.previous)
+            result = self.allocator.allocate(wrench, previous=start)
         else:
             result = self.allocator.allocate_fixed(wrench, request[0], request[1],
-                                                   previous=self.previous)
+                                                   previous=start)
         self.previous = result
         self.ticks += 1
         self.methods[result.method] += 1
@@ -435,6 +480,7 @@ class ThrustAllocatorNode(TiltrovNode):
         self.get_logger().info(f'{why}: forgetting the previous allocation')
         self.previous = None
         self._requests.clear()
+        self._measured.clear()
         self._waiting = None
         self._last_ns = -1
         self._last_msgs = None
@@ -516,6 +562,8 @@ class ThrustAllocatorNode(TiltrovNode):
             'clipped_wrenches': self.clipped,
             'last_feasible': last.feasible if last is not None else True,
             'tilt_request': self.tilt_request_mode,
+            'tilt_source': 'measured' if self.measured_tilts else 'commanded',
+            'measured_tilts_late': self.measured_late,
             'failed_thrusters': [i + 1 for i in self.failed],
             'unachieved_ticks': {dof: self.unachieved[dof] for dof in WRENCH_DOFS},
             'last_shortfall': [float(v) for v in self.last_shortfall],

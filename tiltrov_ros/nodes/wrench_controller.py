@@ -50,10 +50,13 @@ from tiltrov_ros.core.controllers import (
     retune,
 )
 from tiltrov_ros.core.errors import ParameterError
+from tiltrov_ros.core.frames import CONVENTIONS, enu_to_ned
 from tiltrov_ros.core.names import (
     CONTROLLER,
     FRAME_BODY,
+    FRAME_BODY_FLU,
     FRAME_EARTH,
+    FRAME_EARTH_ENU,
     LOCKSTEP,
     MODES,
     ODOM,
@@ -104,6 +107,9 @@ CONTROLLER_PARAMS = ParamTable('wrench_controller', [
     Param('input_timeout', 'float', 1.0, 'lockstep: wall seconds to wait for the '
           'setpoint_velocity of a tick before reading it as zero', 's', low=0.001,
           high=3600.0),
+    Param('odom_frame_convention', 'str', 'ned', "odom in NED/FRD (odom_ned, base_link_frd: "
+          "the plant's) or ENU/FLU (odom, base_link: REP-103/105, e.g. robot_localization), "
+          'converted to NED/FRD on arrival', choices=CONVENTIONS, read_only=True),
     Param('odom_timeout', 'float', 0.5, 'realtime: a zero wrench is published (every control '
           'period) while the newest valid odom is older than this; on sim time measured on '
           '/clock, else wall time since the message arrived; 0: off', 's', low=0.0,
@@ -197,7 +203,8 @@ class WrenchController(TiltrovNode):
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
         self.start_diagnostics()
-        self.get_logger().info(f'{self.kind} controller, {self.mode}, control period '
+        self.get_logger().info(f'{self.kind} controller, {self.mode}, odometry in '
+                               f'{"ENU/FLU" if self.enu else "NED/FRD"}, control period '
                                f'{self.control_period:g} s')
 
     # -- parameters ------------------------------------------------------------------
@@ -216,6 +223,9 @@ class WrenchController(TiltrovNode):
         self.use_velocity = own['use_setpoint_velocity']
         self.input_timeout = own['input_timeout']
         self.odom_timeout = own['odom_timeout']
+        self.enu = own['odom_frame_convention'] == 'enu'
+        self.odom_frames = ((FRAME_EARTH_ENU, FRAME_BODY_FLU) if self.enu
+                            else (FRAME_EARTH, FRAME_BODY))
         self.controller_config = ControllerConfig.from_mapping(
             _config_mapping(lambda name: self.get_parameter(name).value))
 
@@ -257,7 +267,7 @@ class WrenchController(TiltrovNode):
     @input_callback(ODOM)
     def on_odom(self, msg: Odometry) -> None:
         """An odometry message (the raw callback passes those at control ticks)."""
-        ns = self.check_header(msg.header, FRAME_EARTH)
+        ns = self.check_header(msg.header, self.odom_frames[0])
         if ns % self.period_ns:
             return
         if ns == self._last_ns and self._last_msgs is not None:
@@ -267,11 +277,13 @@ class WrenchController(TiltrovNode):
         if ns < self._last_ns:
             self._reset(f'odometry went back from {format_ns(self._last_ns)} to '
                         f'{format_ns(ns)}')
-        check_frame(msg.child_frame_id, FRAME_BODY, 'child_frame_id')
+        check_frame(msg.child_frame_id, self.odom_frames[1], 'child_frame_id')
         position, quaternion, nu = odometry_arrays(msg)
         check_finite(position, 'position')
         check_quaternion(quaternion)
         check_finite(nu, 'twist')
+        if self.enu:            # the core's convention from here on
+            position, quaternion, nu = enu_to_ned(position, quaternion, nu)
         now = self.steady_ns()
         self.odom_watchdog.fresh(ns, now)
         self._tick = _Tick(ns, position, quaternion, nu, now)
