@@ -9,6 +9,9 @@ Measured in one run, so the ratios hold on any machine:
   one (per executor asked for). It is the plant's own figure: sim time over
   the wall time from its initial state to the end (process start-up and
   discovery excluded; the total wall time of the launch is reported too);
+* the same without ``robot_markers`` (``--no-markers``), separate processes and
+  single process: what the plant's markers cost lockstep (``--repeat N``: N
+  interleaved runs of each kind, medians);
 * the odom -> thrust_cmd latency in realtime mode, separate processes and
   single process: for each control tick, the time between a probe receiving the ``odom`` stamped
   t_i and the ``thrust_cmd`` stamped t_i (both DDS reception times in the
@@ -56,9 +59,11 @@ def _launch_argv(*args: str) -> list[str]:
 
 
 def lockstep(scenario: str, duration: float | None, *, single_process: bool,
-             executor: str) -> dict[str, float]:
+             executor: str, markers: bool = True) -> dict[str, float]:
     """One ``tiltrov launch`` in lockstep; the plant's real-time factor."""
     args = ['--scenario', scenario, '--executor', executor]
+    if not markers:
+        args.append('--no-markers')
     if duration is not None:
         args += ['--duration', repr(float(duration))]
     if single_process:
@@ -181,6 +186,8 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     parser.add_argument('--executors', default='events',
                         help='comma-separated executors for the single-process runs '
                              '(events, single, multi; default: events)')
+    parser.add_argument('--repeat', type=int, default=1,
+                        help='lockstep runs of each kind, interleaved; medians reported')
     parser.add_argument('--latency-duration', type=float, default=20.0,
                         help='sim seconds of the realtime latency run (default 20)')
     parser.add_argument('--latency-rtf', type=float, default=1.0)
@@ -195,23 +202,40 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     base = headless(args.scenario, args.duration)
     out.update(headless_wall=base['wall'], headless_rtf=base['rtf'])
     rows.append(('run_scenario (headless)', f"{base['wall']:.2f}", f"{base['rtf']:.1f}", '1.00'))
-    runs = [('separate processes', False, 'events')]
-    runs += [(f'--single-process ({kind})', True, kind)
+    runs = [('separate processes', False, 'events', True)]
+    runs += [(f'--single-process ({kind})', True, kind, True)
              for kind in args.executors.split(',') if kind]
-    for label, single, kind in runs:
-        r = lockstep(args.scenario, args.duration, single_process=single, executor=kind)
+    runs += [('separate processes, --no-markers', False, 'events', False),
+             ('--single-process (events), --no-markers', True, 'events', False)]
+    measured: dict[str, list[dict[str, float]]] = {}
+    for _ in range(args.repeat):        # interleaved, so a change of load hits all alike
+        for label, single, kind, markers in runs:
+            measured.setdefault(label, []).append(lockstep(
+                args.scenario, args.duration, single_process=single, executor=kind,
+                markers=markers))
+    for label, single, kind, markers in runs:
+        r = {k: float(np.median([m[k] for m in measured[label]]))
+             for k in measured[label][0]}
         key = 'single_process' if single else 'separate'
         if single and kind != 'events':
             key += f'_{kind}'
+        if not markers:
+            key += '_no_markers'
         out.update({f'{key}_wall': r['wall'], f'{key}_rtf': r['rtf'],
                     f'{key}_total_wall': r['total_wall']})
         rows.append((f'lockstep, {label}', f"{r['wall']:.2f} ({r['total_wall']:.2f})",
                      f"{r['rtf']:.1f}", f"{r['rtf'] / base['rtf']:.2f}"))
+    for key in ('separate', 'single_process'):
+        # > 1: lockstep is that much faster without the plant's robot_markers.
+        out[f'{key}_markers_cost'] = out[f'{key}_no_markers_rtf'] / out[f'{key}_rtf']
     sim = base['sim']
     print(f'{args.scenario}: {sim:g} s of sim time')
-    print(f"{'run':<42} {'wall s (launch)':>16} {'RTF':>7} {'/headless':>10}")
+    print(f"{'run':<46} {'wall s (launch)':>16} {'RTF':>7} {'/headless':>10}")
     for row in rows:
-        print(f'{row[0]:<42} {row[1]:>16} {row[2]:>7} {row[3]:>10}')
+        print(f'{row[0]:<46} {row[1]:>16} {row[2]:>7} {row[3]:>10}')
+    print(f"robot_markers cost (RTF without / with): separate processes "
+          f"{out['separate_markers_cost']:.2f}, single process "
+          f"{out['single_process_markers_cost']:.2f}")
     runs_wanted = {r for r in args.latency_runs.split(',') if r}
     if runs_wanted - {'separate', 'single'}:
         parser.error(f'--latency-runs: unknown {sorted(runs_wanted - {"separate", "single"})}')

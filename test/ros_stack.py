@@ -17,6 +17,7 @@ import numpy as np
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
+from visualization_msgs.msg import MarkerArray
 
 from tiltrov_ros.core import names
 from tiltrov_ros.core.names import PLANT
@@ -36,7 +37,7 @@ TOPIC_TYPES: dict[str, Any] = {
     'setpoint': PoseStamped, 'setpoint_velocity': TwistStamped,
     'wrench_cmd': WrenchStamped, 'tilt_request': JointState,
     'thrust_cmd': JointState, 'tilt_cmd': JointState, 'wrench_achieved': WrenchStamped,
-    '/diagnostics': DiagnosticArray,
+    '/diagnostics': DiagnosticArray, 'robot_markers': MarkerArray,
 }
 
 
@@ -165,8 +166,9 @@ class StackRun:
         return next(n for n, s in zip(self.nodes, self.specs) if s.name == name)
 
 
-#: The stack's topics but /diagnostics.
-STACK_TOPICS = tuple(t for t in names.STACK_TOPICS if t != names.DIAGNOSTICS)
+#: The stack's topics but /diagnostics and robot_markers (not part of the control loop).
+STACK_TOPICS = tuple(t for t in names.STACK_TOPICS
+                     if t not in (names.DIAGNOSTICS, names.ROBOT_MARKERS))
 
 
 def run_stack(context: Any, executor: Any, options: LaunchOptions, *,

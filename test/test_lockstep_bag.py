@@ -11,6 +11,7 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 import subprocess
 import sys
@@ -74,6 +75,45 @@ def test_analyze_of_a_lockstep_bag_gives_the_metrics_of_tiltrov_sim(
     # message DDS delivered was read by its CDR layout, none needed rosbags' decoder.
     meta = read_runlog(bag).meta['bag']
     assert meta['missing'] == {} and meta['decoded_one_by_one'] == {}
+
+
+@pytest.mark.slow
+def test_the_bag_shows_the_robot_markers_of_every_tenth_of_a_second(
+        lockstep_bags: dict[str, Path]) -> None:
+    """What Foxglove's 3D panel draws from a demo bag: one MarkerArray per 0.1 s of sim
+    time (t = 0 to the end), 17 markers each, in odom_ned, every pose and point finite,
+    the body where odom puts it."""
+    from nav_msgs.msg import Odometry
+    from rclpy.serialization import deserialize_message
+    from visualization_msgs.msg import Marker, MarkerArray
+
+    bag = lockstep_bags['pd']
+    odom = {}
+    for raw in iter_raw(bag, ['/odom']):
+        msg = deserialize_message(raw.data, Odometry)
+        odom[leading_stamp_ns(raw.data, raw.msgtype)] = msg.pose.pose
+    arrays = [deserialize_message(raw.data, MarkerArray)
+              for raw in iter_raw(bag, ['/robot_markers'])]
+    stamps = [a.markers[0].header.stamp.sec * 10**9 + a.markers[0].header.stamp.nanosec
+              for a in arrays]
+    end = to_ns(float(DURATION))
+    assert sorted(set(stamps)) == list(range(0, end + 1, to_ns(0.1)))
+    for array, stamp in zip(arrays, stamps):
+        markers = array.markers
+        assert len(markers) == 17
+        assert {m.header.frame_id for m in markers} == {'odom_ned'}
+        numbers = [v for m in markers for v in (
+            m.pose.position.x, m.pose.position.y, m.pose.position.z, m.pose.orientation.w,
+            m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z,
+            *(c for p in m.points for c in (p.x, p.y, p.z)))]
+        assert all(math.isfinite(v) for v in numbers)
+        body = markers[0]
+        assert body.ns == 'body' and body.type == Marker.CUBE
+        assert body.pose.position == odom[stamp].position
+        got, want = body.pose.orientation, odom[stamp].orientation
+        np.testing.assert_allclose([got.w, got.x, got.y, got.z],
+                                   [want.w, want.x, want.y, want.z], rtol=0, atol=1e-12)
+        assert sum(m.type == Marker.ARROW for m in markers) == 12
 
 
 @pytest.mark.slow

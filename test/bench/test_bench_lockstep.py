@@ -23,8 +23,9 @@ def test_bench_lockstep_main_returns_its_numbers(capsys: pytest.CaptureFixture[s
                            '--latency-duration', '2.0', '--latency-rtf', '2.0',
                            '--latency-runs', 'separate'])
     for key in ('headless_rtf', 'separate_rtf', 'single_process_rtf', 'latency_median_ms',
-                'latency_p99_ms'):
+                'latency_p99_ms', 'separate_no_markers_rtf', 'single_process_markers_cost'):
         assert results[key] > 0.0, key
     assert results['latency_samples'] >= 10
     out = capsys.readouterr().out
     assert 'lockstep, separate processes' in out and 'odom -> thrust_cmd' in out
+    assert 'robot_markers cost' in out

@@ -33,6 +33,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help='--realtime: sim seconds per wall second (default 1.0)')
     parser.add_argument('--record', type=Path, default=None, metavar='DIR',
                         help='record every topic into the bag directory DIR (bag_recorder)')
+    parser.add_argument('--no-markers', dest='markers', action='store_false',
+                        help='the plant publishes no robot_markers (for RViz and Foxglove)')
     parser.add_argument('--single-process', action='store_true',
                         help='run every node in this process on one executor')
     parser.add_argument('--executor', choices=('events', 'single', 'multi'), default=None,
@@ -65,7 +67,7 @@ def options_from_args(args: argparse.Namespace) -> LaunchOptions:
         real_time_factor=args.real_time_factor, record=args.record,
         single_process=args.single_process, namespace=args.namespace,
         params=tuple(args.param), stall_timeout=args.stall_timeout, executor=args.executor,
-        respawn=tuple(args.respawn), status_file=args.status_file)
+        respawn=tuple(args.respawn), status_file=args.status_file, markers=args.markers)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -50,6 +50,7 @@ TILT_CMD = 'tilt_cmd'
 WRENCH_ACHIEVED = 'wrench_achieved'
 CLOCK = '/clock'
 DIAGNOSTICS = '/diagnostics'
+ROBOT_MARKERS = 'robot_markers'
 
 #: Every topic of the stack -> its ROS 2 type, in the order the stack publishes
 #: them within a step and a tick.
@@ -65,6 +66,7 @@ STACK_TOPICS: dict[str, str] = {
     TILT_CMD: 'sensor_msgs/msg/JointState',
     THRUST_CMD: 'sensor_msgs/msg/JointState',
     DIAGNOSTICS: 'diagnostic_msgs/msg/DiagnosticArray',
+    ROBOT_MARKERS: 'visualization_msgs/msg/MarkerArray',
 }
 
 # --------------------------------------------------------------------------- nodes

@@ -3,7 +3,7 @@ built from them (:class:`PlantConfig`): one line per parameter, validated once."
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 from tiltrov_ros.core.disturbances import Disturbances
@@ -15,6 +15,7 @@ from tiltrov_ros.core.paramtable import Param, ParamTable
 from tiltrov_ros.core.plant import Plant
 from tiltrov_ros.core.scenarios import InitialState, Scenario, ThrusterFault, load_scenario
 from tiltrov_ros.core.timebase import to_ns
+from tiltrov_ros.core.visual import Scales
 
 from .parameters import check, declare, declare_failed_thrusters, declare_robot
 
@@ -54,6 +55,13 @@ PLANT_PARAMS = ParamTable('plant_simulator', [
     Param('command_timeout', 'float', 0.5, 'realtime: sim seconds without a thrust_cmd after '
           'which the thrusters are commanded to zero (tilts held) until commands return; '
           '0: off', 's', low=0.0, high=3600.0),
+    Param('markers_period', 'float', 0.1, 'sim time between two robot_markers (at the steps '
+          'that are multiples of it, a whole number of steps); 0: none', 's', low=0.0,
+          high=60.0, read_only=True),
+    Param('marker_scales', 'floats', (Scales.thrust, Scales.force, Scales.moment),
+          'robot_markers arrow lengths: per newton of thrust, per newton of force, per '
+          'newton metre of moment', 'm/N, m/N, m/(N m)', size=3, low=0.0, high=10.0,
+          read_only=True),
 ])
 #: Parameters whose defaults are the scenario's (declared once the scenario is known).
 _FROM_SCENARIO = ('com_error', 'current')
@@ -77,6 +85,8 @@ class PlantConfig:
     startup_subscribers: int
     startup_delay: float             # s, wall
     command_timeout: float = 0.5     # s, sim time; 0: off
+    markers_period_ns: int = 0                      # robot_markers; 0: none
+    marker_scales: Scales = field(default_factory=Scales)
     failed_thrusters: tuple[int, ...] = ()          # indices 0..3 (parameter)
     faults: tuple[ThrusterFault, ...] = ()          # the scenario's
 
@@ -110,9 +120,11 @@ def declare_parameters(node: TiltrovNode) -> PlantConfig:
         raise ParameterError('control_period', f'got {period!r} s; allowed: a whole '
                              f'multiple of step_size ({v["step_size"]!r} s)')
     duration_ns = to_ns(v['duration'])
-    if duration_ns % step_ns:
-        raise ParameterError('duration', f'got {v["duration"]!r} s; allowed: 0 or a whole '
-                             f'number of steps ({v["step_size"]!r} s)')
+    markers_ns = to_ns(v['markers_period'])
+    for name, ns in (('duration', duration_ns), ('markers_period', markers_ns)):
+        if ns % step_ns:
+            raise ParameterError(name, f'got {v[name]!r} s; allowed: 0 or a whole number of '
+                                 f'steps ({v["step_size"]!r} s)')
     return PlantConfig(
         mode=v['mode'], real_time_factor=v['real_time_factor'], step_ns=step_ns,
         control_period_ns=period_ns,
@@ -122,4 +134,5 @@ def declare_parameters(node: TiltrovNode) -> PlantConfig:
         scenario=v['scenario'], duration_ns=duration_ns, exit_at_end=v['exit_at_end'],
         stall_timeout=v['stall_timeout'], startup_subscribers=v['startup_subscribers'],
         startup_delay=v['startup_delay'], command_timeout=v['command_timeout'],
+        markers_period_ns=markers_ns, marker_scales=Scales(*v['marker_scales']),
         failed_thrusters=failed, faults=scenario.faults if scenario is not None else ())

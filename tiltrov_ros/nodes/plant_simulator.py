@@ -4,7 +4,8 @@ Subscribes ``thrust_cmd`` (thruster_1..4, effort N) and ``tilt_cmd``
 (tilt_front, tilt_rear, position rad) and hands them to the actuator models
 (``Plant.command``); publishes at every plant step, stamped with the sim time
 t_i in integer ns (the first message is the initial state at t = 0):
-``/clock``, then ``joint_states``, then ``odom``. The clock first: a node on
+``/clock``, then ``joint_states``, then ``odom``, and every ``markers_period``
+``robot_markers`` (nodes/markers.py). The clock first: a node on
 sim time has its clock at t_i when the state stamped t_i arrives (its stamp
 checks and a recorder's log times are then exact, docs/bags.md), the
 reference publisher answers the clock while the state is on its way, and the
@@ -80,6 +81,7 @@ from .conversions import (
     set_stamp,
 )
 from .executors import main_loop
+from .markers import RobotMarkers
 from .parameters import Overrides
 from .plant_config import declare_parameters
 from .qos import PUBLISHER_QOS, RELIABLE_QOS
@@ -118,6 +120,9 @@ class PlantSimulator(TiltrovNode):
         self._odom_pub = self.create_safe_publisher(Odometry, ODOM, PUBLISHER_QOS)
         self._joint_pub = self.create_safe_publisher(JointState, JOINT_STATES, PUBLISHER_QOS)
         self._clock_pub = self.create_safe_publisher(ClockMsg, CLOCK, PUBLISHER_QOS)
+        c = self.config
+        self.markers = (RobotMarkers(self, c.robot.length, c.robot.width, c.markers_period_ns,
+                                     c.marker_scales) if c.markers_period_ns else None)
         self._odom_msg = new_odometry()
         self._joint_msg = new_joint_state(TILTS + THRUSTERS)
         self._clock_msg = ClockMsg()
@@ -172,6 +177,9 @@ class PlantSimulator(TiltrovNode):
         self._joint_pub.publish(self._joint_msg)
         self._odom_pub.publish(fill_odometry(self._odom_msg, ns, s.position, s.quaternion,
                                              s.nu))
+        if self.markers is not None and self.markers.due(ns):
+            self.markers.publish(s, self.plant.thrusters.command_held,
+                                 self.plant.servos.command_held)
 
     def _reached_end(self) -> bool:
         end = self.config.duration_ns

@@ -7,7 +7,7 @@ numbers of ``tiltrov launch`` and ``tiltrov sim``. Arguments::
 
     scenario:=pitch_hold  controller:=pd|switching|pid  allocator:=robust|paper
     mode:=lockstep|realtime  real_time_factor:=1.0  duration:=SEC
-    namespace:=NS  record:=DIR
+    namespace:=NS  record:=DIR  markers:=true|false
 
 The run ends as ``tiltrov launch`` ends it: when the plant reaches
 ``duration`` it exits (code 0), the other nodes are stopped (SIGINT), then the
@@ -56,6 +56,7 @@ ARGUMENTS = {
     'duration': ('', "sim seconds to run; empty: the scenario's"),
     'namespace': ('', 'namespace pushed on every node and relative topic'),
     'record': ('', 'bag directory to record every topic into (must not exist); empty: none'),
+    'markers': ('true', 'true: the plant publishes robot_markers (for RViz and Foxglove)'),
 }
 
 
@@ -78,11 +79,14 @@ def options_from(values: dict[str, str]) -> LaunchOptions:
         raise LaunchError(f'duration and real_time_factor are numbers: {exc}') from None
     if factor <= 0:
         raise LaunchError(f'real_time_factor:={factor:g}: must be > 0')
+    if values['markers'] not in ('true', 'false'):
+        raise LaunchError(f'markers:={values["markers"]!r}: allowed: true or false')
     return LaunchOptions(
         scenario=values['scenario'], controller=values['controller'] or None,
         allocator=values['allocator'] or None, duration=duration, lockstep=mode == LOCKSTEP,
         real_time_factor=factor, record=Path(values['record']) if values['record'] else None,
-        namespace=values['namespace'], launcher='ros2 launch')
+        namespace=values['namespace'], launcher='ros2 launch',
+        markers=values['markers'] == 'true')
 
 
 def _stack(context: LaunchContext) -> list[Any]:

@@ -62,6 +62,7 @@ class LaunchOptions:
     respawn: tuple[str, ...] = ()          # node names started again when they die
     status_file: Path | None = None        # the launch's state as JSON (StatusFile)
     launcher: str = 'tiltrov launch'       # what started the run (the bag's run_info)
+    markers: bool = True                   # the plant publishes robot_markers
 
 
 @dataclass(frozen=True)
@@ -163,6 +164,8 @@ def stack_specs(options: LaunchOptions, *, config_dir: Path | None = None,
         plant['startup_delay'] = RECORDER_STARTUP_DELAY
     if options.stall_timeout is not None:
         plant['stall_timeout'] = float(options.stall_timeout)
+    if not options.markers:
+        plant['markers_period'] = 0.0
     controller = {'controller': kind, 'mode': mode, **sim, **robot}
     allocator: dict[str, Any] = {
         'tilt_request': 'required' if kind == 'switching' else 'ignored',

@@ -1,0 +1,104 @@
+"""What the robot looks like in the earth frame: the geometry of ``robot_markers``.
+
+From the pose (``odom``), the actual tilts and thrusts (``joint_states``), the
+commanded ones (``tilt_cmd``, ``thrust_cmd``) and the demanded and achieved
+wrench (``wrench_cmd``, ``wrench_achieved``), :func:`robot_scene` places, in
+``odom_ned``:
+
+* the body, a box around the thrusters (l + 0.2 m by d + 0.1 m by 0.25 m);
+* each thruster, a cylinder at r_i (``thrust_map.thruster_positions``) along its
+  thrust direction at its actual tilt (``thrust_map.thruster_directions``, eq. (4));
+* an arrow per thruster for the actual thrust and one for the commanded thrust
+  (at the commanded tilt), ``thrust_scale`` m per N;
+* the demanded and achieved force (``force_scale`` m per N) and moment
+  (``moment_scale`` m per N m) as arrows from the body origin, rotated into
+  the earth frame.
+
+Pure numpy; the visualizer node turns a :class:`Scene` into messages.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from tiltrov_ros.core.kinematics import Rquat, quat_normalize
+from tiltrov_ros.core.thrust_map import thruster_directions, thruster_positions
+
+FloatArray = NDArray[np.float64]
+
+#: m added to l, d around the thrusters, and the body's height (a drawing, not the model).
+BODY_MARGIN = (0.2, 0.1)
+BODY_HEIGHT = 0.25
+
+
+@dataclass(frozen=True)
+class Scales:
+    """Arrow lengths: m per N of thrust and force, m per N m of moment."""
+
+    thrust: float = 0.01
+    force: float = 0.005
+    moment: float = 0.02
+
+
+@dataclass(frozen=True)
+class Scene:
+    """The robot in the earth frame (every point in ``odom_ned``, m)."""
+
+    body_position: FloatArray          # (3,)
+    body_quaternion: FloatArray        # (4,) w x y z
+    body_size: FloatArray              # (3,) along the body's x, y, z
+    thruster_positions: FloatArray     # (4, 3)
+    thruster_quaternions: FloatArray   # (4, 4): a cylinder's z axis along the thrust
+    thrust_actual: FloatArray          # (4, 2, 3): start and end of each arrow
+    thrust_commanded: FloatArray       # (4, 2, 3)
+    force_demanded: FloatArray         # (2, 3)
+    force_achieved: FloatArray         # (2, 3)
+    moment_demanded: FloatArray        # (2, 3)
+    moment_achieved: FloatArray        # (2, 3)
+
+
+def quat_from_z(direction: ArrayLike) -> FloatArray:
+    """The shortest rotation (w, x, y, z) taking the z axis to the unit ``direction``."""
+    d = np.asarray(direction, dtype=float)
+    if d[2] < -1.0 + 1e-12:                 # opposite: half a turn about x
+        return np.array([0.0, 1.0, 0.0, 0.0])
+    return quat_normalize(np.array([1.0 + d[2], -d[1], d[0], 0.0]))
+
+
+def robot_scene(position: ArrayLike, quaternion: ArrayLike, length: float, width: float, *,
+                tilts: ArrayLike, thrusts: ArrayLike, commanded_tilts: ArrayLike,
+                commanded_thrusts: ArrayLike, wrench_cmd: ArrayLike,
+                wrench_achieved: ArrayLike, scales: Scales = Scales()) -> Scene:
+    """The :class:`Scene` of one state (see the module docstring)."""
+    p = np.asarray(position, dtype=float)
+    q = quat_normalize(quaternion)
+    R = Rquat(q)
+    at = p + thruster_positions(length, width) @ R.T
+
+    def arrows(tilt: ArrayLike, force: ArrayLike) -> FloatArray:
+        a = np.asarray(tilt, dtype=float)
+        along = thruster_directions(float(a[0]), float(a[1])) @ R.T
+        ends = at + scales.thrust * np.asarray(force, dtype=float)[:, None] * along
+        return np.stack([at, ends], axis=1)
+
+    def from_body(vector: FloatArray, scale: float) -> FloatArray:
+        return np.stack([p, p + scale * (R @ vector)])
+
+    a = np.asarray(tilts, dtype=float)
+    directions = thruster_directions(float(a[0]), float(a[1])) @ R.T
+    demanded = np.asarray(wrench_cmd, dtype=float)
+    achieved = np.asarray(wrench_achieved, dtype=float)
+    return Scene(
+        body_position=p, body_quaternion=q,
+        body_size=np.array([length + BODY_MARGIN[0], width + BODY_MARGIN[1], BODY_HEIGHT]),
+        thruster_positions=at,
+        thruster_quaternions=np.array([quat_from_z(d) for d in directions]),
+        thrust_actual=arrows(tilts, thrusts),
+        thrust_commanded=arrows(commanded_tilts, commanded_thrusts),
+        force_demanded=from_body(demanded[:3], scales.force),
+        force_achieved=from_body(achieved[:3], scales.force),
+        moment_demanded=from_body(demanded[3:], scales.moment),
+        moment_achieved=from_body(achieved[3:], scales.moment))

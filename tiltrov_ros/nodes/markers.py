@@ -1,0 +1,249 @@
+"""``robot_markers``: the robot as a visualization_msgs/MarkerArray, published by the plant.
+
+Every ``markers_period`` of sim time (at the plant steps whose time is a
+multiple of it) the plant publishes one MarkerArray in ``odom_ned`` stamped
+with the step, so RViz and Foxglove show it with no TF (display frame
+``odom_ned``): 17 markers, namespaces ``body`` (a box), ``thrusters`` (4
+cylinders along the thrust at the actual tilt), ``thrust_actual`` and
+``thrust_commanded`` (4 arrows each: the thrusters' state and the commands in
+force), ``force_demanded``, ``force_achieved``, ``moment_demanded`` and
+``moment_achieved`` (an arrow each from the body origin: the latest
+``wrench_cmd`` and ``wrench_achieved``). The geometry is
+:func:`tiltrov_ros.core.visual.robot_scene`'s.
+
+In the plant because it holds everything but the two wrenches (read raw, the
+latest of each kept as bytes and decoded only when markers are due): a
+separate node would read ``odom`` and ``joint_states`` at every step, which
+cost lockstep more than building 17 markers ten times per simulated second
+(docs/nodes.md, "robot_markers").
+"""
+
+from __future__ import annotations
+
+import functools
+import struct
+from typing import Any
+
+from geometry_msgs.msg import Point, WrenchStamped
+import numpy as np
+from rclpy.serialization import deserialize_message, serialize_message
+from visualization_msgs.msg import Marker, MarkerArray
+
+from tiltrov_ros.core.names import FRAME_EARTH, ROBOT_MARKERS, WRENCH_ACHIEVED, WRENCH_CMD
+from tiltrov_ros.core.plant import PlantSample
+from tiltrov_ros.core.validation import InvalidInput, check_finite
+from tiltrov_ros.core.visual import Scales, Scene, robot_scene
+
+from .base import TiltrovNode
+from .conversions import set_stamp, wrench_array
+from .qos import PUBLISHER_QOS, RELIABLE_QOS
+
+_GREY, _DARK = (0.55, 0.6, 0.7, 0.6), (0.15, 0.15, 0.15, 1.0)
+#: (namespace, count, type, RGBA) of the markers, in their order in the array.
+LAYOUT = (
+    ('body', 1, Marker.CUBE, _GREY),
+    ('thrusters', 4, Marker.CYLINDER, _DARK),
+    ('thrust_actual', 4, Marker.ARROW, (1.0, 0.55, 0.0, 1.0)),
+    ('thrust_commanded', 4, Marker.ARROW, (0.0, 0.75, 1.0, 0.6)),
+    ('force_demanded', 1, Marker.ARROW, (0.9, 0.1, 0.1, 0.8)),
+    ('force_achieved', 1, Marker.ARROW, (0.1, 0.8, 0.1, 0.8)),
+    ('moment_demanded', 1, Marker.ARROW, (0.8, 0.1, 0.8, 0.8)),
+    ('moment_achieved', 1, Marker.ARROW, (0.1, 0.6, 0.6, 0.8)),
+)
+#: m: thruster cylinders (diameter, length) and arrows (shaft and head diameters).
+THRUSTER_SIZE = (0.09, 0.12)
+ARROW_SIZE = (0.02, 0.04)
+
+
+def new_marker_array() -> MarkerArray:
+    """The markers of :data:`LAYOUT`, in ``odom_ned``, ready to be filled."""
+    out = MarkerArray()
+    for ns, count, kind, rgba in LAYOUT:
+        for i in range(count):
+            m = Marker(ns=ns, id=i, type=kind, action=Marker.ADD)
+            m.header.frame_id = FRAME_EARTH
+            m.color.r, m.color.g, m.color.b, m.color.a = rgba
+            m.pose.orientation.w = 1.0
+            if kind == Marker.ARROW:
+                m.scale.x, m.scale.y = ARROW_SIZE
+                m.points = [Point(), Point()]
+            elif kind == Marker.CYLINDER:
+                m.scale.x = m.scale.y = THRUSTER_SIZE[0]
+                m.scale.z = THRUSTER_SIZE[1]
+            out.markers.append(m)
+    return out
+
+
+def _set_pose(marker: Marker, position: Any, quaternion: Any) -> None:
+    p, o = marker.pose.position, marker.pose.orientation
+    p.x, p.y, p.z = (float(v) for v in position)
+    o.w, o.x, o.y, o.z = (float(v) for v in quaternion)
+
+
+def _set_arrow(marker: Marker, ends: Any) -> None:
+    for point, end in zip(marker.points, ends):
+        point.x, point.y, point.z = (float(v) for v in end)
+
+
+def fill_markers(msg: MarkerArray, ns: int, scene: Scene) -> MarkerArray:
+    """Write ``scene`` into ``msg`` (from :func:`new_marker_array`) stamped ``ns``."""
+    markers = iter(msg.markers)
+    body = next(markers)
+    _set_pose(body, scene.body_position, scene.body_quaternion)
+    body.scale.x, body.scale.y, body.scale.z = (float(v) for v in scene.body_size)
+    for position, quaternion in zip(scene.thruster_positions, scene.thruster_quaternions):
+        _set_pose(next(markers), position, quaternion)
+    for arrows in (scene.thrust_actual, scene.thrust_commanded):
+        for ends in arrows:
+            _set_arrow(next(markers), ends)
+    for ends in (scene.force_demanded, scene.force_achieved, scene.moment_demanded,
+                 scene.moment_achieved):
+        _set_arrow(next(markers), ends)
+    for m in msg.markers:
+        set_stamp(m.header.stamp, ns)
+    return msg
+
+
+#: The Scene fields that change from one message to the next, in the order of their
+#: values in :func:`scene_values` (the body's size too: it is the robot's).
+_FIELDS = ('body_position', 'body_quaternion', 'body_size', 'thruster_positions',
+           'thruster_quaternions', 'thrust_actual', 'thrust_commanded', 'force_demanded',
+           'force_achieved', 'moment_demanded', 'moment_achieved')
+_SHAPES = {'body_position': (3,), 'body_quaternion': (4,), 'body_size': (3,),
+           'thruster_positions': (4, 3), 'thruster_quaternions': (4, 4),
+           'thrust_actual': (4, 2, 3), 'thrust_commanded': (4, 2, 3), 'force_demanded': (2, 3),
+           'force_achieved': (2, 3), 'moment_demanded': (2, 3), 'moment_achieved': (2, 3)}
+_COUNT = sum(int(np.prod(shape)) for shape in _SHAPES.values())
+
+
+def scene_values(scene: Scene) -> np.ndarray:
+    """Every number of ``scene`` the markers show, flat, in :data:`_FIELDS` order."""
+    return np.concatenate([np.asarray(getattr(scene, f), dtype=float).ravel()
+                           for f in _FIELDS])
+
+
+def _scene_of(values: np.ndarray) -> Scene:
+    parts, start = {}, 0
+    for f in _FIELDS:
+        n = int(np.prod(_SHAPES[f]))
+        parts[f] = values[start:start + n].reshape(_SHAPES[f])
+        start += n
+    return Scene(**parts)
+
+
+class MarkerBytes:
+    """The serialized MarkerArray, rewritten in place for each scene.
+
+    rclpy converts 17 Marker objects field by field for every message (about
+    0.5 ms); here one template is serialized with a distinct sentinel in every
+    number that changes, the sentinels' byte offsets are found once, and each
+    message writes the new numbers there (a few microseconds). rclpy leaves the
+    CDR padding bytes as it finds them, so a sentinel could also show up in
+    padding: offsets are kept only when each sentinel occurs once and a check
+    message decodes to the one :func:`fill_markers` makes (else other sentinels
+    are tried).
+    """
+
+    def __init__(self) -> None:
+        for attempt in range(8):
+            if self._build(attempt) and self._checks_out():
+                return
+        raise RuntimeError('robot_markers: no unique offsets in the serialized template')
+
+    def _build(self, attempt: int) -> bool:
+        sentinels = (1 + 2 * attempt) * 1e6 + np.arange(_COUNT, dtype=float)
+        sec, nanosec = 0x5A5A0000 + 0x100 * attempt, 0x3A3A0000 + 0x100 * attempt
+        msg = fill_markers(new_marker_array(), 0, _scene_of(sentinels))
+        for i, m in enumerate(msg.markers):
+            m.header.stamp.sec, m.header.stamp.nanosec = sec + i, nanosec + i
+        template = serialize_message(msg)
+        n = len(msg.markers)
+        found = [self._offsets(template, [struct.pack('<d', v) for v in sentinels]),
+                 self._offsets(template, [struct.pack('<i', sec + i) for i in range(n)]),
+                 self._offsets(template, [struct.pack('<I', nanosec + i) for i in range(n)])]
+        if any(f is None for f in found):
+            return False
+        self._template = np.frombuffer(template, dtype=np.uint8).copy()
+        self._doubles, self._secs, self._nanosecs = found
+        return True
+
+    @staticmethod
+    def _offsets(blob: bytes, patterns: list[bytes]) -> np.ndarray | None:
+        """Byte indices of each pattern, as one flat array; None unless each occurs once."""
+        out = []
+        for pattern in patterns:
+            at = blob.find(pattern)
+            if at < 0 or blob.find(pattern, at + 1) >= 0:
+                return None
+            out.append(np.arange(at, at + len(pattern)))
+        return np.concatenate(out)
+
+    def _checks_out(self) -> bool:
+        values = np.linspace(-3.0, 3.0, _COUNT)
+        scene, ns = _scene_of(values), 1_234_567_890_123
+        expected = serialize_message(fill_markers(new_marker_array(), ns, scene))
+        return bool(deserialize_message(self.serialize(ns, scene), MarkerArray)
+                    == deserialize_message(expected, MarkerArray))
+
+    def serialize(self, ns: int, scene: Scene) -> bytes:
+        """The MarkerArray of ``scene`` stamped ``ns``, serialized."""
+        buf = self._template.copy()
+        buf[self._doubles] = scene_values(scene).astype('<f8').view(np.uint8)
+        sec, nanosec = divmod(ns, 1_000_000_000)
+        n = len(self._secs) // 4
+        buf[self._secs] = np.full(n, sec, dtype='<i4').view(np.uint8)
+        buf[self._nanosecs] = np.full(n, nanosec, dtype='<u4').view(np.uint8)
+        return buf.tobytes()
+
+
+class RobotMarkers:
+    """The plant's ``robot_markers`` publisher (see the module docstring)."""
+
+    def __init__(self, node: TiltrovNode, length: float, width: float, period_ns: int,
+                 scales: Scales) -> None:
+        self.node = node
+        self.length, self.width = length, width
+        self.period_ns = period_ns
+        self.scales = scales
+        self.publisher = node.create_safe_publisher(MarkerArray, ROBOT_MARKERS, PUBLISHER_QOS)
+        self._bytes = MarkerBytes()
+        self._last_ns = -1
+        self._wrenches = {WRENCH_CMD: np.zeros(6), WRENCH_ACHIEVED: np.zeros(6)}
+        self._latest: dict[str, bytes] = {}
+        for topic in self._wrenches:
+            node.create_subscription(WrenchStamped, topic, functools.partial(self._keep, topic),
+                                     RELIABLE_QOS, raw=True)
+
+    def _keep(self, topic: str, data: bytes) -> None:
+        self._latest[topic] = data
+
+    def due(self, ns: int) -> bool:
+        """Markers are due at ``ns`` (a multiple of the period, not yet published)."""
+        return ns % self.period_ns == 0 and ns != self._last_ns
+
+    def publish(self, sample: PlantSample, commanded_thrusts: Any,
+                commanded_tilts: Any) -> None:
+        """The markers of ``sample`` and the commands in force, stamped with its time."""
+        self._update_wrenches()
+        scene = robot_scene(sample.position, sample.quaternion, self.length, self.width,
+                            tilts=sample.tilts, thrusts=sample.thrusts,
+                            commanded_tilts=commanded_tilts,
+                            commanded_thrusts=commanded_thrusts,
+                            wrench_cmd=self._wrenches[WRENCH_CMD],
+                            wrench_achieved=self._wrenches[WRENCH_ACHIEVED],
+                            scales=self.scales)
+        self._last_ns = sample.t_ns
+        self.publisher.publish(self._bytes.serialize(sample.t_ns, scene))
+
+    def _update_wrenches(self) -> None:
+        """Decode the latest wrenches; a bad one is rejected (counted on /diagnostics)
+        and the one before it stays."""
+        latest, self._latest = self._latest, {}
+        for topic, data in latest.items():
+            wrench = wrench_array(deserialize_message(data, WrenchStamped))
+            try:
+                check_finite(wrench, 'wrench')
+            except InvalidInput as bad:
+                self.node.reject_input(topic, bad)
+                continue
+            self._wrenches[topic] = wrench
