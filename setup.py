@@ -33,6 +33,8 @@ setup(
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', glob('config/*.yaml')),
         ('share/' + package_name + '/config/scenarios', glob('config/scenarios/*.yaml')),
+        ('share/' + package_name + '/config/foxglove', glob('config/foxglove/*.json')),
+        ('share/' + package_name + '/config/plotjuggler', glob('config/plotjuggler/*.xml')),
         ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
     ],
     python_requires='>=3.11',
