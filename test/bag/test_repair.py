@@ -158,7 +158,7 @@ def recorded(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         bag.flush()
         if i == 25:
             shutil.copytree(bag_dir, snapshot)
-    bag._writer.abort()  # type: ignore[union-attr]  # as if killed: no summary, no footer
+    bag.abort()                 # as if killed: no summary, no footer
     return {'dir': bag_dir, 'snapshot': snapshot}
 
 

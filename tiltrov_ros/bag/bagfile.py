@@ -143,6 +143,18 @@ def bag_info(path: str | Path) -> BagInfo:
             topics=topics, custom_data=_custom_data(reader, resolved))
 
 
+def read_messages(reader: Reader, path: str | Path,
+                  connections: Collection[Connection]) -> Iterator[tuple[Connection, int, Any]]:
+    """``reader.messages(connections=...)``, with a chunk that fails its CRC (or cannot
+    be decompressed) reported as a :class:`BagError` naming the bag."""
+    try:
+        yield from reader.messages(connections=list(connections))
+    except Exception as exc:  # rosbags raises ReaderError, its decompressors their own
+        raise BagError(f'cannot read {path}: {type(exc).__name__}: {exc} (`tiltrov bag info '
+                       f'{path}` shows where; `tiltrov bag repair {path}` keeps the rest)'
+                       ) from None
+
+
 @dataclass(frozen=True)
 class RawMessage:
     """One recorded message, undecoded."""
@@ -159,5 +171,5 @@ def iter_raw(path: str | Path, topics: Collection[str] | None = None) -> Iterato
         connections = [c for c in reader.connections if topics is None or c.topic in topics]
         if not connections:
             return
-        for conn, log_time, data in reader.messages(connections=connections):
+        for conn, log_time, data in read_messages(reader, path, connections):
             yield RawMessage(conn.topic, conn.msgtype, log_time, bytes(data))

@@ -60,7 +60,7 @@ from tiltrov_ros.core.timebase import seconds, stamp_to_ns
 from tiltrov_ros.progress import ProgressBar
 
 from . import cdr
-from .bagfile import bag_info, open_reader
+from .bagfile import bag_info, open_reader, read_messages
 from .msgdefs import typestore
 
 NAN = math.nan
@@ -330,7 +330,7 @@ def read_series(path: str | Path, decoders: Mapping[str, Decoder], *,
                          delay=0.0 if progress else 1.0) as bar:
             show = progress is not False and total > 0
             for i, (conn, log_time, data) in enumerate(
-                    reader.messages(connections=connections) if connections else ()):
+                    read_messages(reader, path, connections) if connections else ()):
                 batches[conn.topic].add(data, log_time)
                 if show and i % 4096 == 0:
                     bar(i / total)

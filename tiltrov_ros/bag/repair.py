@@ -7,7 +7,10 @@ ending somewhere after the last chunk it wrote out, and the provisional
 Strategy: read the MCAP file front to back with the mcap library's stream
 reader and keep every record up to the first one that is incomplete or
 malformed. A chunk is only used whole, so the recovered messages are exactly
-those of the complete chunks: everything up to the last chunk written. They
+those of the complete chunks: everything up to the last chunk written. A chunk
+whose records fail their CRC (a flipped bit on disk, :mod:`.integrity`) is
+skipped and reported with its log-time range and message count, and the
+reading goes on past it. They
 are written, bytes untouched and with their log times, to a new bag by the
 same writer the recorder uses (same chunk compression), with a full summary
 and a ``metadata.yaml`` computed from what was recovered (message counts,
@@ -31,7 +34,7 @@ from typing import Any, BinaryIO
 
 from mcap.exceptions import InvalidMagic
 from mcap.reader import make_reader
-from mcap.records import Channel, Chunk, Message, Metadata, Schema
+from mcap.records import Channel, Chunk, Message, MessageIndex, Metadata, Schema
 from mcap.stream_reader import StreamReader, breakup_chunk
 from rosbags.interfaces import Connection
 from rosbags.rosbag2 import Reader
@@ -39,6 +42,7 @@ from rosbags.rosbag2.metadata import parse_qos
 import yaml
 
 from ..core.errors import BagError
+from .integrity import check_file, chunk_problem
 from .msgdefs import hash_of_definition, message_definition
 from .writer import BagWriter, is_being_written
 
@@ -55,6 +59,7 @@ class RepairResult:
     stopped_at: int = 0                         # bytes of the original file used
     file_size: int = 0
     reason: str = ''                            # why the original was not readable
+    skipped: list[str] = field(default_factory=list)   # damaged chunks left out
 
     @property
     def total(self) -> int:
@@ -89,6 +94,9 @@ def problem(path: str | Path) -> str | None:
         return f'{type(exc).__name__}: {exc}'
     if summary is None or summary.statistics is None:
         return 'the MCAP file has no summary'
+    integrity = check_file(mcap)
+    if integrity.damaged:
+        return integrity.summary()
     if summary.statistics.message_count != listed:
         return (f'metadata.yaml lists {listed} messages, the MCAP summary '
                 f'{summary.statistics.message_count}')
@@ -113,6 +121,23 @@ class _Scan:
     stopped_at: int = 0                  # end of the last complete record
     error: BaseException | None = None   # what stopped the reading
     custom_data: dict[str, str] = field(default_factory=dict)
+    skipped: list[_Skipped] = field(default_factory=list)   # chunks that failed
+
+
+@dataclass
+class _Skipped:
+    """A chunk left out: where, its log times, and (from its message indexes) how many
+    messages it held."""
+
+    offset: int
+    start_ns: int
+    end_ns: int
+    why: str
+    messages: int = 0
+
+    def __str__(self) -> str:
+        return (f'chunk at byte {self.offset}, log time {self.start_ns / 1e9:.3f} to '
+                f'{self.end_ns / 1e9:.3f} s: {self.messages} message(s) lost ({self.why})')
 
 
 def _records(stream: BinaryIO, size: int,
@@ -120,15 +145,29 @@ def _records(stream: BinaryIO, size: int,
     """Schemas, channels and messages of every complete record, then stop."""
     # No record is longer than the file: a corrupt length stops the reading.
     reader = StreamReader(stream, emit_chunks=True, record_size_limit=max(size, 1))
+    skipped: _Skipped | None = None      # the damaged chunk whose indexes follow
     try:
         for record in reader.records:
             if isinstance(record, Chunk):
                 scan.compression = scan.compression or record.compression
-                inner = breakup_chunk(record, validate_crc=True)
+                offset = scan.stopped_at
                 scan.stopped_at = stream.tell()
+                why = chunk_problem(record.compression, record.data, record.uncompressed_size,
+                                    record.uncompressed_crc)
+                if why is not None:
+                    skipped = _Skipped(offset, record.message_start_time,
+                                       record.message_end_time, why)
+                    scan.skipped.append(skipped)
+                    continue
+                skipped = None
+                inner = breakup_chunk(record, validate_crc=True)
                 yield from (r for r in inner if isinstance(r, (Schema, Channel, Message)))
                 continue
             scan.stopped_at = stream.tell()
+            if isinstance(record, MessageIndex) and skipped is not None:
+                skipped.messages += len(record.records)
+                continue
+            skipped = None
             if isinstance(record, (Schema, Channel, Message)):
                 yield record
             elif isinstance(record, Metadata) and record.name == 'rosbag2':
@@ -186,7 +225,8 @@ def repair(path: str | Path, *, force: bool = False) -> RepairResult:
             os.replace(new, original)
     finally:
         shutil.rmtree(work, ignore_errors=True)
-    return RepairResult(directory, counts, backups, scan.stopped_at, size, reason)
+    return RepairResult(directory, counts, backups, scan.stopped_at, size, reason,
+                        [str(s) for s in scan.skipped])
 
 
 def _rewrite(mcap: Path, staging: Path, provisional: dict[str, Any],
@@ -223,7 +263,8 @@ def _rewrite(mcap: Path, staging: Path, provisional: dict[str, Any],
             bag.set_custom_data(REPAIRED_KEY, (
                 f'{datetime.now(UTC).isoformat(timespec="seconds")}: '
                 f'{sum(bag.counts.values())} messages recovered from the first '
-                f'{scan.stopped_at} of {size} bytes ({reason})'))
+                f'{scan.stopped_at} of {size} bytes ({reason})'
+                + ''.join(f'; skipped {s}' for s in scan.skipped)))
             counts = bag.counts
     return scan, counts
 

@@ -1,19 +1,29 @@
-"""Writing a rosbag2 directory (``metadata.yaml`` + one ``.mcap``) with rosbags.
+"""Writing a rosbag2 directory (``metadata.yaml`` + one ``.mcap``).
 
-:class:`BagWriter` is rosbags' ``Writer`` with its MCAP storage, plus what a
-recorder that may be killed needs:
+:class:`BagWriter` writes the MCAP file with the mcap library's writer, as
+rosbag2's MCAP storage plugin (ROS 2 Jazzy) lays it out, plus what a recorder
+that may be killed needs:
 
-* :meth:`BagWriter.flush` closes the pending MCAP chunk and hands it to the
+* integrity: every chunk carries the CRC-32 of its uncompressed records, the
+  data-section end the CRC of everything before it, and the footer the CRC of
+  the summary (:mod:`.integrity` checks them; ``tiltrov bag info`` and
+  ``repair`` report a chunk that fails);
+* channels as rosbag2's plugin writes them: ``cdr`` messages, a ``ros2msg``
+  schema per type, channel metadata ``offered_qos_profiles`` (YAML) and
+  ``topic_type_hash`` (the type's RIHS01 hash, as ``metadata.yaml``'s
+  ``type_description_hash``); the ``rosbag2`` metadata record at close;
+* :meth:`BagWriter.flush` closes the pending chunk and hands it to the
   operating system, so a killed process loses at most the messages written
   since the last flush (``tiltrov bag repair`` recovers the rest);
-* :attr:`BagWriter.flushed_counts` says how many messages of each topic are
-  in complete chunks on disk;
+  :attr:`BagWriter.flushed_counts` says how many messages of each topic are in
+  complete chunks on disk;
 * a provisional ``metadata.yaml`` (zero counts) is kept up to date while the
   bag is open: the topics with their type hashes and QoS, and the custom data
   (the run description), which the MCAP file only receives at close.
 
-Chunks are closed when they reach rosbags' chunk size (1 MiB uncompressed)
-and at every :meth:`flush`. The payloads are written untouched.
+Chunks are closed when they reach :data:`CHUNK_SIZE` (1 MiB of records, as
+rosbags' and rosbag2's default) and at every :meth:`flush`. The payloads are
+written untouched.
 """
 
 from __future__ import annotations
@@ -21,19 +31,30 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 import os
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, BinaryIO, Literal
 
-from rosbags.interfaces import Connection, Qos
-from rosbags.rosbag2 import Writer, WriterError
-from rosbags.rosbag2.enums import CompressionFormat, CompressionMode, StoragePlugin
+from mcap.writer import CompressionType
+from mcap.writer import Writer as McapWriter
+from rosbags.interfaces import (
+    Connection,
+    ConnectionExtRosbag2,
+    MessageDefinition,
+    MessageDefinitionFormat,
+    Qos,
+)
 from rosbags.rosbag2.metadata import dump_qos_v9
 import yaml
 
+from .. import __version__
 from ..core.errors import BagError
 from .msgdefs import message_definition
 
 METADATA_VERSION: Literal[9] = 9  # rosbag2 metadata version of ROS 2 Jazzy
 COMPRESSIONS = ('none', 'zstd')
+#: Bytes of records after which the pending chunk is closed.
+CHUNK_SIZE = 1 << 20
+#: Record overhead of one message in a chunk: opcode, length, channel, sequence, times.
+_MESSAGE_OVERHEAD = 1 + 8 + 2 + 4 + 8 + 8
 
 
 def _lock(stream: Any, *, exclusive: bool) -> bool:
@@ -78,33 +99,32 @@ class BagWriter:
             raise BagError(f'compression must be one of {COMPRESSIONS}, not {compression!r}')
         self.path = Path(path)
         self.compression = compression
-        if self.path.exists():
-            raise BagError(f'{self.path} exists already; choose a new bag directory')
-        self._writer: Writer | None = Writer(self.path, version=METADATA_VERSION,
-                                             storage_plugin=StoragePlugin.MCAP)
-        if compression == 'zstd':
-            self._writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
-        for key, value in (custom_data or {}).items():
-            self._writer.set_custom_data(key, value)
+        self.mcap_path = self.path / f'{self.path.name}.mcap'
         try:
-            self._writer.open()
-        except (WriterError, OSError) as exc:
+            self.path.mkdir(mode=0o755, parents=True)
+            stream: BinaryIO = self.mcap_path.open('xb')
+        except FileExistsError:
+            raise BagError(f'{self.path} exists already; choose a new bag directory') from None
+        except OSError as exc:
             raise BagError(f'cannot create bag {self.path}: {exc}') from exc
-        # rosbags' McapWriter: `chunks` (closed chunks), `chunk.msgs` (pending
-        # messages by channel), `close_chunk()`, `bio` (the open file), `path`.
-        self._storage: Any = self._writer.storage
-        if not all(hasattr(self._storage, name)
-                   for name in ('chunks', 'chunk', 'close_chunk', 'bio', 'path')):
-            self._writer.abort()
-            raise BagError('this rosbags version has no flushable MCAP storage '
-                           '(tested with rosbags 0.11)')
-        _lock(self._storage.bio, exclusive=True)  # released when closed or killed
-        self._chunks_done = 0
-        self._topics: dict[int, str] = {}
+        self._stream = stream
+        _lock(stream, exclusive=True)  # released when closed or killed
+        self._mcap: McapWriter | None = McapWriter(
+            stream, chunk_size=1 << 62,     # chunks are closed here (see write)
+            compression=CompressionType.ZSTD if compression == 'zstd' else CompressionType.NONE,
+            enable_crcs=True, enable_data_crcs=True)
+        self._mcap.start(profile='ros2', library=f'tiltrov_ros {__version__}')
+        self._custom = {str(k): str(v) for k, v in (custom_data or {}).items()}
+        self._connections: list[Connection] = []
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[int, int] = {}         # connection id -> MCAP channel id
+        self._counts: dict[int, int] = {}
         self._flushed: dict[int, int] = {}
-        self._final_counts: dict[int, int] = {}
+        self._pending = 0                            # bytes of records in the open chunk
+        self._start = 2**63 - 1
+        self._end = 0
         self.closed = False
-        self._write_provisional_metadata()
+        self._write_metadata_yaml(provisional=True)
 
     # -- topics --------------------------------------------------------------
 
@@ -115,26 +135,39 @@ class BagWriter:
         The message definition and hash come from :mod:`.msgdefs` unless given;
         ``qos`` are the publishers' offered profiles.
         """
-        self._check_open()
+        writer = self._open()
         if msgdef is None:
             msgdef, known_hash = message_definition(msgtype)
             rihs01 = rihs01 or known_hash
-        try:
-            connection = self._writer.add_connection(  # type: ignore[union-attr]
-                topic, msgtype, msgdef=msgdef, rihs01=rihs01 or None,
-                serialization_format='cdr', offered_qos_profiles=list(qos))
-        except WriterError as exc:
-            raise BagError(f'cannot add topic {topic!r} to {self.path}: {exc}') from exc
-        self._topics[connection.id] = topic
+        if not rihs01:
+            raise BagError(f'cannot add topic {topic!r} to {self.path}: no type hash')
+        if any(c.topic == topic and c.msgtype == msgtype for c in self._connections):
+            raise BagError(f'cannot add topic {topic!r} to {self.path}: added already')
+        fmt = 'ros2idl' if msgdef.startswith('=' * 80 + '\nIDL: ') else 'ros2msg'
+        if msgtype not in self._schemas:
+            self._schemas[msgtype] = writer.register_schema(msgtype, fmt, msgdef.encode())
+        connection = Connection(
+            id=len(self._connections) + 1, topic=topic, msgtype=msgtype,
+            msgdef=MessageDefinition(MessageDefinitionFormat.MSG if fmt == 'ros2msg'
+                                     else MessageDefinitionFormat.IDL, msgdef),
+            digest=rihs01, msgcount=0,
+            ext=ConnectionExtRosbag2(serialization_format='cdr',
+                                     offered_qos_profiles=list(qos)),
+            owner=self)
+        self._channels[connection.id] = writer.register_channel(
+            topic, 'cdr', self._schemas[msgtype],
+            {'offered_qos_profiles': _qos_text(qos), 'topic_type_hash': rihs01})
+        self._connections.append(connection)
+        self._counts[connection.id] = 0
         self._flushed[connection.id] = 0
-        self._write_provisional_metadata()
+        self._write_metadata_yaml(provisional=True)
         return connection
 
     def set_custom_data(self, key: str, value: str) -> None:
         """Set one ``custom_data`` entry (written at close; provisional file now)."""
-        self._check_open()
-        self._writer.set_custom_data(key, value)  # type: ignore[union-attr]
-        self._write_provisional_metadata()
+        self._open()
+        self._custom[str(key)] = str(value)
+        self._write_metadata_yaml(provisional=True)
 
     # -- messages ------------------------------------------------------------
 
@@ -143,11 +176,15 @@ class BagWriter:
 
         Returns True when this write completed a chunk, which is then on disk.
         """
-        writer = self._writer
-        if writer is None:
-            raise BagError(f'bag {self.path} is closed')
-        writer.write(connection, timestamp, data)
-        if len(self._storage.chunks) != self._chunks_done:
+        writer = self._open()
+        payload = bytes(data)
+        writer.add_message(self._channels[connection.id], log_time=timestamp, data=payload,
+                           publish_time=timestamp)
+        self._counts[connection.id] += 1
+        self._start = min(self._start, timestamp)
+        self._end = max(self._end, timestamp)
+        self._pending += len(payload) + _MESSAGE_OVERHEAD
+        if self._pending > CHUNK_SIZE:
             self._sync()
             return True
         return False
@@ -157,63 +194,77 @@ class BagWriter:
 
         Returns True when a chunk was written.
         """
-        self._check_open()
-        storage = self._storage
-        if not storage.chunk.msgs:
+        self._open()
+        if not self._pending:
             return False
-        storage.close_chunk()
         self._sync()
         return True
 
     def _sync(self) -> None:
-        self._storage.bio.flush()
-        self._chunks_done = len(self._storage.chunks)
-        assert self._writer is not None
-        self._flushed = dict(self._writer.counts)
+        assert self._mcap is not None
+        self._mcap.flush()          # closes the chunk (CRC, index) and flushes the stream
+        self._pending = 0
+        self._flushed = dict(self._counts)
 
     # -- state ---------------------------------------------------------------
 
     @property
     def counts(self) -> dict[str, int]:
         """Messages written per topic."""
-        counts = self._writer.counts if self._writer is not None else self._final_counts
-        return {self._topics[cid]: n for cid, n in counts.items()}
+        return {c.topic: self._counts[c.id] for c in self._connections}
 
     @property
     def flushed_counts(self) -> dict[str, int]:
         """Messages per topic in complete chunks on disk (all of them after close)."""
-        return {self._topics[cid]: n for cid, n in self._flushed.items()}
+        return {c.topic: self._flushed[c.id] for c in self._connections}
 
     def close(self) -> None:
         """Write the summary and ``metadata.yaml``. Safe to call twice."""
-        if self._writer is None:
+        if self._mcap is None:
             return
-        writer, self._writer = self._writer, None
-        self._final_counts = dict(writer.counts)
+        writer, self._mcap = self._mcap, None
         try:
-            writer.close()
-        except (WriterError, OSError) as exc:
+            writer.flush()
+            writer.add_metadata('rosbag2', {'serialized_metadata': yaml.safe_dump(
+                self._info(provisional=False), sort_keys=False).strip()})
+            writer.finish()
+            self._stream.close()
+        except OSError as exc:
             raise BagError(f'cannot close bag {self.path}: {exc}') from exc
         finally:
             self.closed = True
-        self._flushed = dict(self._final_counts)
+        self._pending = 0
+        self._flushed = dict(self._counts)
+        self._write_metadata_yaml(provisional=False)
 
-    def _check_open(self) -> None:
-        if self._writer is None:
+    def abort(self) -> None:
+        """Close the file as a killed process leaves it: the chunks flushed so far, no
+        summary, no footer (``tiltrov bag repair`` recovers them)."""
+        if self._mcap is None:
+            return
+        self._mcap = None
+        self._stream.close()
+        self.closed = True
+
+    def _open(self) -> McapWriter:
+        if self._mcap is None:
             raise BagError(f'bag {self.path} is closed')
+        return self._mcap
 
-    def _write_provisional_metadata(self) -> None:
-        """metadata.yaml while recording: topics, hashes, QoS and custom data."""
-        writer = self._writer
-        assert writer is not None
-        mcap_name = self._storage.path.name
-        info: dict[str, Any] = {
+    def _info(self, *, provisional: bool) -> dict[str, Any]:
+        """``rosbag2_bagfile_information``: while recording, the topics, hashes, QoS
+        and custom data with zero counts; at close, the counts and times too."""
+        name = self.mcap_path.name
+        total = 0 if provisional else sum(self._counts.values())
+        start = 0 if provisional or not total else self._start
+        duration = 0 if provisional or not total else self._end - self._start
+        return {
             'version': METADATA_VERSION,
             'storage_identifier': 'mcap',
-            'relative_file_paths': [mcap_name],
-            'duration': {'nanoseconds': 0},
-            'starting_time': {'nanoseconds_since_epoch': 0},
-            'message_count': 0,
+            'relative_file_paths': [name],
+            'duration': {'nanoseconds': duration},
+            'starting_time': {'nanoseconds_since_epoch': start},
+            'message_count': total,
             'topics_with_message_count': [
                 {'topic_metadata': {
                     'name': c.topic,
@@ -222,19 +273,21 @@ class BagWriter:
                     'offered_qos_profiles': dump_qos_v9(
                         list(c.ext.offered_qos_profiles)),  # type: ignore[union-attr]
                     'type_description_hash': c.digest},
-                 'message_count': 0}
-                for c in writer.connections],
+                 'message_count': 0 if provisional else self._counts[c.id]}
+                for c in self._connections],
             'compression_format': '',
             'compression_mode': '',
-            'files': [{'path': mcap_name, 'starting_time': {'nanoseconds_since_epoch': 0},
-                       'duration': {'nanoseconds': 0}, 'message_count': 0}],
-            'custom_data': dict(writer.custom_data) or None,
-            'ros_distro': 'rosbags',
+            'files': [{'path': name, 'starting_time': {'nanoseconds_since_epoch': start},
+                       'duration': {'nanoseconds': duration}, 'message_count': total}],
+            'custom_data': dict(self._custom) or None,
+            'ros_distro': 'jazzy',
         }
+
+    def _write_metadata_yaml(self, *, provisional: bool) -> None:
         target = self.path / 'metadata.yaml'
         tmp = target.with_suffix('.yaml.tmp')
-        tmp.write_text(yaml.safe_dump({'rosbag2_bagfile_information': info},
-                                      sort_keys=False), encoding='utf8')
+        tmp.write_text(yaml.safe_dump({'rosbag2_bagfile_information': self._info(
+            provisional=provisional)}, sort_keys=False), encoding='utf8')
         os.replace(tmp, target)
 
     def __enter__(self) -> BagWriter:
@@ -242,3 +295,8 @@ class BagWriter:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _qos_text(qos: Sequence[Qos]) -> str:
+    """The publishers' QoS as rosbag2 stores them in a channel's metadata (YAML)."""
+    return yaml.safe_dump(dump_qos_v9(list(qos)), sort_keys=False).strip()

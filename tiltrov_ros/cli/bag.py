@@ -1,7 +1,10 @@
 """``tiltrov bag``: look into a bag and repair one whose recorder was killed.
 
-    tiltrov bag info BAG      topics, types, counts, duration, run_info
-    tiltrov bag repair BAG    recover a bag whose recorder died (see bag/repair.py)
+    tiltrov bag info BAG      topics, types, counts, duration, run_info, integrity (CRCs)
+    tiltrov bag repair BAG    recover a bag whose recorder died or whose chunk is damaged
+                              (see bag/repair.py)
+
+``info`` exits 1 when a CRC of the MCAP file does not match (bag/integrity.py).
 """
 
 from __future__ import annotations
@@ -15,7 +18,8 @@ from tiltrov_ros.core.timebase import seconds
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest='action', metavar='ACTION', required=True)
-    info = sub.add_parser('info', help='topics, types, message counts, duration and run_info')
+    info = sub.add_parser('info', help='topics, types, message counts, duration, run_info and '
+                                       'the integrity of the MCAP file (exit 1 if damaged)')
     info.add_argument('bag', help='bag directory (or its .mcap file)')
     fix = sub.add_parser(
         'repair', help='recover the messages of a bag whose recorder was killed',
@@ -38,6 +42,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _info(path: str) -> int:
     from tiltrov_ros.bag.bagfile import bag_info
+    from tiltrov_ros.bag.integrity import check_file
+    from tiltrov_ros.bag.repair import find_mcap
 
     info = bag_info(path)
     print(f'bag:       {info.path}')
@@ -48,7 +54,9 @@ def _info(path: str) -> int:
         print(f'  {name:<{width}}  {topic.count:>8}  {topic.msgtype}')
     if info.run_info:
         print(f'run_info:  {json.dumps(info.run_info, sort_keys=True)}')
-    return 0
+    integrity = check_file(find_mcap(path)[1])
+    print(f'integrity: {integrity.summary()}')
+    return 1 if integrity.damaged else 0
 
 
 def _repair(path: str, *, force: bool) -> int:
@@ -63,5 +71,7 @@ def _repair(path: str, *, force: bool) -> int:
           f'{result.file_size} bytes:')
     for name, count in sorted(result.counts.items()):
         print(f'  {name}: {count}')
+    for skipped in result.skipped:
+        print(f'skipped a damaged {skipped}')
     print('originals kept as ' + ', '.join(p.name for p in result.backups))
     return 0
