@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 import time
 from typing import Any
 
@@ -23,6 +24,7 @@ from tiltrov_ros.core import names
 from tiltrov_ros.core.names import PLANT
 from tiltrov_ros.core.timebase import NS_PER_S as NS
 from tiltrov_ros.nodes.conversions import stamp_ns
+from tiltrov_ros.paths import executable
 from tiltrov_ros.stack.inprocess import build_nodes
 from tiltrov_ros.stack.specs import LaunchOptions, NodeSpec, stack_specs
 
@@ -236,3 +238,11 @@ def finite_outputs(probe: Probe) -> bool:
     from tiltrov_ros.nodes.conversions import message_is_finite
     return all(message_is_finite(m) for topic, messages in probe.messages.items()
                for m in messages if topic != '/diagnostics')
+
+
+def installed(name: str) -> Path:
+    """The package's installed executable, found as the product finds it (the ament
+    index, PATH, the venv's bin: :func:`tiltrov_ros.paths.executable`)."""
+    found = executable(name)
+    assert found is not None, f'{name} is not installed (ament index, PATH, venv bin)'
+    return found

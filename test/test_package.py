@@ -52,7 +52,7 @@ def test_ros_wheels_are_not_install_requires() -> None:
 
 @pytest.mark.slow
 def test_colcon_build_installs_what_ros2_run_needs(tmp_path: Path) -> None:
-    colcon = Path(sys.executable).with_name('colcon')
+    colcon = Path(shutil.which('colcon') or Path(sys.executable).with_name('colcon'))
     assert colcon.exists(), 'colcon-common-extensions is part of the dev install'
     # Build from a copy of the tracked sources, as a workspace checkout would be.
     src = tmp_path / 'src' / 'tiltrov_ros'

@@ -15,7 +15,9 @@ Three layouts are supported, tried in this order:
 from __future__ import annotations
 
 from functools import cache
+import os
 from pathlib import Path
+import shutil
 import sys
 
 PACKAGE_NAME = 'tiltrov_ros'
@@ -37,7 +39,7 @@ def share_dir() -> Path:
     else:
         try:
             return Path(get_package_share_directory(PACKAGE_NAME))
-        except PackageNotFoundError:
+        except (PackageNotFoundError, ValueError, OSError):  # OSError: no AMENT_PREFIX_PATH
             pass
     prefix_share = Path(sys.prefix) / 'share' / PACKAGE_NAME
     if (prefix_share / 'config').is_dir():
@@ -58,6 +60,41 @@ def config_file(name: str) -> Path:
     if not path.is_file():
         raise FileNotFoundError(f'no shipped config file {name!r} in {config_dir()}')
     return path
+
+
+def executable(name: str) -> Path | None:
+    """The package's executable ``name`` (a node, ``tiltrov``), or None.
+
+    Looked for where the installation the package runs from puts it, then
+    where a user's shell would find it:
+
+    1. ``lib/tiltrov_ros`` of the prefix the ament index gives for the package
+       (a colcon install: where ``ros2 run`` finds it);
+    2. next to the running script (``tiltrov`` itself, from either layout);
+    3. on ``PATH``;
+    4. next to the interpreter (the ``bin`` of a virtual environment).
+    """
+    candidates = []
+    try:
+        from ament_index_python.packages import PackageNotFoundError, get_package_prefix
+    except ImportError:
+        pass
+    else:
+        try:
+            candidates.append(Path(get_package_prefix(PACKAGE_NAME)) / 'lib' / PACKAGE_NAME)
+        except (PackageNotFoundError, ValueError, OSError):  # OSError: no AMENT_PREFIX_PATH
+            pass
+    if sys.argv and sys.argv[0]:
+        candidates.append(Path(sys.argv[0]).resolve().parent)
+    found = shutil.which(name)
+    if found:
+        candidates.append(Path(found).parent)
+    candidates.append(Path(sys.executable).parent)
+    for directory in candidates:
+        path = directory / name
+        if path.is_file() and os.access(path, os.X_OK):
+            return path
+    return None
 
 
 def scenario_dir() -> Path:

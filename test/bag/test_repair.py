@@ -9,7 +9,6 @@ import re
 import shutil
 import signal
 import subprocess
-import sys
 import threading
 import time
 from typing import Any
@@ -19,6 +18,7 @@ from mcap_ros2.decoder import DecoderFactory
 import pytest
 from rclpy.qos import HistoryPolicy, QoSProfile
 from rclpy.serialization import serialize_message
+from ros_stack import installed
 from rosbags.rosbag2 import Reader
 from stack_messages import RUN_INFO, STACK, canonical, wait_matched
 import yaml
@@ -48,7 +48,7 @@ def test_repair_recovers_what_a_killed_recorder_had_flushed(ros: Any, tmp_path: 
     bag = tmp_path / 'killed'
     argv = recorder_command(str(bag), run_info=RUN_INFO,
                             params={'topics': list(TOPICS), 'flush_period': 0.0})
-    argv[0] = str(Path(sys.executable).with_name('bag_recorder'))
+    argv[0] = str(installed('bag_recorder'))
     argv += ['--log-level', 'bag_recorder.stats:=debug']
     proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     lines: list[str] = []

@@ -6,7 +6,6 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 import subprocess
-import sys
 import threading
 from typing import Any
 
@@ -16,6 +15,7 @@ import numpy as np
 import pytest
 from rclpy.qos import QoSProfile
 from rclpy.serialization import serialize_message
+from ros_stack import installed
 from rosgraph_msgs.msg import Clock
 from stack_messages import STACK, canonical
 
@@ -75,7 +75,7 @@ def test_replay_publishes_the_bytes_on_the_scaled_schedule(ros: Any, tmp_path: P
     recorded = make_bag(tmp_path / 'bag')
     listener = Listener(ros.node('listener'),
                         {'/odom': Odometry, '/wrench_cmd': WrenchStamped, '/clock': Clock})
-    tiltrov = str(Path(sys.executable).with_name('tiltrov'))
+    tiltrov = str(installed('tiltrov'))
     proc = subprocess.Popen([tiltrov, 'replay', str(tmp_path / 'bag'), '--rate', '2',
                              '--wait-for-subscribers', '20'],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)

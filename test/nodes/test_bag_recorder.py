@@ -8,7 +8,6 @@ import json
 from pathlib import Path
 import signal
 import subprocess
-import sys
 import threading
 from typing import Any
 
@@ -21,6 +20,7 @@ from rclpy.exceptions import InvalidParameterValueException
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
+from ros_stack import installed
 from rosbags.interfaces import QosReliability
 from rosbags.rosbag2 import Reader
 from rosgraph_msgs.msg import Clock
@@ -195,7 +195,7 @@ def test_a_signal_closes_the_bag(ros: Any, tmp_path: Path, sig: signal.Signals) 
     """The standalone process records what it was sent and writes a complete bag."""
     bag = tmp_path / 'signalled'
     argv = recorder_command(str(bag), params={'topics': ['odom']})
-    argv[0] = str(Path(sys.executable).with_name('bag_recorder'))
+    argv[0] = str(installed('bag_recorder'))
     proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                             text=True)
     lines: list[str] = []

@@ -95,6 +95,8 @@ WATCHDOG_PERIOD = 0.05
 STARTUP_RETRY = 0.25
 #: Most plant steps one realtime timer callback catches up before it re-bases.
 MAX_CATCH_UP = 100
+#: s (wall): at the end of the run, the longest wait for the readers' acknowledgements.
+DELIVERY_TIMEOUT = 5.0
 #: lockstep: most ticks with commands held before their time (only the present one is
 #: legitimate; the cap keeps a misbehaving publisher from growing the table).
 MAX_PENDING = 100
@@ -468,15 +470,24 @@ class PlantSimulator(TiltrovNode):
             'failed_thrusters': [i + 1 for i in plant.failed_thrusters],
         }
 
-    def wait_for_delivery(self, timeout: float = 0.5) -> bool:
+    def wait_for_delivery(self, timeout: float = DELIVERY_TIMEOUT) -> bool:
         """Wait (at most ``timeout`` s in all) until every reliable reader acknowledged
-        the last messages (end of run). Fast DDS acknowledges on its heartbeat period,
-        so this is a bounded courtesy: the samples are already on the wire."""
+        the last messages (end of run), so that none is lost with this process.
+
+        Usually immediate. A sample a busy reader (a recorder on a loaded machine)
+        dropped from its queue is sent again only when the reader asks for it, after
+        the writer's next heartbeat (seconds with Fast DDS's defaults), hence the
+        bound; a reader that never acknowledges is reported.
+        """
         deadline = self.steady_ns() + to_ns(timeout)
         acked = True
         for pub in (self._joint_pub, self._odom_pub, self._clock_pub):
             left = max(deadline - self.steady_ns(), 0)
             acked = pub.wait_for_all_acked(Duration(nanoseconds=left)) and acked
+        if not acked:
+            self.get_logger().warning(
+                f'a reader did not acknowledge the last odom/joint_states/clock within '
+                f'{timeout:g} s: it may miss them')
         return acked
 
 

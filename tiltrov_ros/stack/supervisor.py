@@ -30,6 +30,7 @@ import threading
 import time
 from typing import IO, Any
 
+from tiltrov_ros import paths
 from tiltrov_ros.core.names import (
     PLANT,
     RECORDER,
@@ -80,16 +81,10 @@ class Output:
 
 
 def executable(spec: NodeSpec) -> list[str]:
-    """argv[0:] that runs ``spec``'s node: its console script, else ``python -m``.
-
-    Looked for next to the running ``tiltrov`` script (``lib/tiltrov_ros`` of a
-    colcon install, ``bin`` of a venv) and next to the interpreter.
-    """
-    for directory in (Path(sys.argv[0]).resolve().parent, Path(sys.executable).parent):
-        candidate = directory / spec.name
-        if candidate.is_file() and os.access(candidate, os.X_OK):
-            return [str(candidate)]
-    return [sys.executable, '-m', spec.module]
+    """argv[0:] that runs ``spec``'s node: its installed executable
+    (:func:`tiltrov_ros.paths.executable`), else ``python -m`` its module."""
+    found = paths.executable(spec.name)
+    return [str(found)] if found is not None else [sys.executable, '-m', spec.module]
 
 
 def _die_with_parent() -> None:  # pragma: no cover - runs in the child
