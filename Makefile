@@ -28,7 +28,7 @@ $(STAMP): setup.py setup.cfg package.xml requirements/ros-jazzy.txt requirements
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -c requirements/constraints.txt \
-		-r requirements/ros-jazzy.txt -e '.[bags,dev]'
+		-r requirements/ros-jazzy.txt -e '.[bags,campaign,dev]'
 	@# colcon must never crawl into the venv (the ROS wheels ship package.xml files).
 	@touch $(VENV)/COLCON_IGNORE
 	@touch $(STAMP)
