@@ -12,7 +12,7 @@ OUT    ?= runs/demo
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export MPLBACKEND ?= Agg
 
-.PHONY: install demo test lint typecheck bench soak figures clean help
+.PHONY: install demo test lint typecheck bench soak figures campaign clean help
 
 help:
 	@echo "make demo     run the full stack on the paper's positioning scenario (bag, figures, metrics)"
@@ -21,6 +21,7 @@ help:
 	@echo "make bench    benchmarks (speed ratios against baselines measured in the same run)"
 	@echo "make soak     one hour of simulated time in lockstep (not part of make test)"
 	@echo "make figures  regenerate the README's result table and figures"
+	@echo "make campaign a small random station-keeping campaign on a local Dask cluster"
 
 install: $(STAMP)
 
@@ -51,6 +52,14 @@ soak: $(STAMP)
 
 figures: $(STAMP)
 	$(VENV)/bin/tiltrov report --readme README.md
+
+# A small version by default; `make campaign SAMPLES=200 CAMPAIGN_OUT=runs/camp` for the
+# real one. --resume: run again, it only finishes what is missing and re-summarizes.
+SAMPLES      ?= 8
+CAMPAIGN_OUT ?= runs/campaign-$(SAMPLES)
+campaign: $(STAMP)
+	$(VENV)/bin/tiltrov campaign config/campaigns/station_keeping.yaml --samples $(SAMPLES) \
+		--out $(CAMPAIGN_OUT) --resume
 
 clean:
 	rm -rf $(VENV) build install log .pytest_cache .mypy_cache .ruff_cache runs

@@ -34,6 +34,8 @@ COMMANDS: dict[str, Command] = {
     'analyze': Command('.analyze', 'metrics.json and figures of recorded runs (bags)'),
     'soak': Command('.soak', 'one hour of simulated time in lockstep, recorded: RSS of each '
                              'process, messages published vs recorded, stalls'),
+    'campaign': Command('.campaign.cli', 'Monte-Carlo runs of a campaign file on Dask: hold '
+                                         'rate per configuration, table, figures'),
     'launch': Command('.launcher', 'start the ROS stack (plant, controller, allocator, '
                                    'reference) for a scenario, lockstep or realtime'),
 }
