@@ -3,7 +3,7 @@
 * By default a :class:`~distributed.LocalCluster`: worker processes, one per
   core (``--workers``), one thread each, BLAS libraries pinned to one thread
   (``OMP_NUM_THREADS``, ``OPENBLAS_NUM_THREADS``, ``MKL_NUM_THREADS`` set
-  before the workers start), no dashboard.
+  before the workers start), listening on 127.0.0.1 only, no dashboard.
 * With ``scheduler='tcp://HOST:8786'``, the Dask cluster running there
   (``dask scheduler`` and ``dask worker`` processes, or dask-jobqueue); its
   workers need this package installed (checked before anything is sent).
@@ -23,6 +23,8 @@ from contextlib import contextmanager
 import logging
 import math
 import os
+import signal
+import threading
 from typing import Any
 
 from tiltrov_ros.campaign.plan import RunTask
@@ -66,9 +68,13 @@ def dask_client(scheduler: str | None = None, workers: int | None = None) -> Ite
         count = workers or os.cpu_count() or 1
         environ = {**dask.config.get('distributed.nanny.pre-spawn-environ', {}),
                    **PINNED_THREADS}
-        with dask.config.set({'distributed.nanny.pre-spawn-environ': environ}):
+        with dask.config.set({'distributed.nanny.pre-spawn-environ': environ}), \
+                _workers_ignore_ctrl_c():
+            # On this machine only; no dashboard, its HTTP routes on a free port.
             cluster = LocalCluster(n_workers=count, threads_per_worker=1, processes=True,
-                                   dashboard_address=None, silence_logs=logging.ERROR)
+                                   host='127.0.0.1', dashboard_address=None,
+                                   scheduler_kwargs={'dashboard_address': '127.0.0.1:0'},
+                                   silence_logs=logging.ERROR)
         client = Client(cluster)
     try:
         if scheduler:
@@ -78,6 +84,21 @@ def dask_client(scheduler: str | None = None, workers: int | None = None) -> Ite
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+@contextmanager
+def _workers_ignore_ctrl_c() -> Iterator[None]:
+    """Worker processes started inside ignore SIGINT (an ignored signal stays ignored in
+    a child): Ctrl-C reaches the whole process group, and the client alone stops the
+    campaign and then the cluster, without a traceback from every worker."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def _check_workers(client: Any, scheduler: str) -> None:

@@ -61,9 +61,12 @@ def _percentiles(values: Sequence[float], scale: float) -> dict[str, float | Non
     return {name: float(v) for name, v in zip(names, found)}
 
 
-def _badness(row: Mapping[str, str]) -> tuple[int, int, float]:
+def _worst_first(row: Mapping[str, str]) -> tuple[bool, bool, float, str]:
+    """Sort key: failed runs, then runs that do not hold, then by final position error
+    (largest first), then by run id (so the order does not depend on the table's)."""
     error = final_position_error(row)
-    return (row['status'] != 'ok', row['holds'] != '1', error if error is not None else math.inf)
+    return (row['status'] == 'ok', row['holds'] == '1',
+            -error if error is not None else -math.inf, row['run_id'])
 
 
 def summarize(spec: CampaignSpec, rows: Sequence[Mapping[str, str]], *,
@@ -76,7 +79,7 @@ def summarize(spec: CampaignSpec, rows: Sequence[Mapping[str, str]], *,
         holds = sum(r['holds'] == '1' for r in mine)
         positions = [e for e in map(final_position_error, ok) if e is not None]
         attitudes = [e for e in map(final_attitude_error, ok) if e is not None]
-        ranked = sorted(mine, key=_badness, reverse=True)[:worst]
+        ranked = sorted(mine, key=_worst_first)[:worst]
         out.append(ConfigSummary(config.name, len(mine), len(mine) - len(ok), holds,
                                  holds / len(mine) if mine else None,
                                  _percentiles(positions, 1e3),

@@ -14,6 +14,7 @@ from typing import Any
 
 import yaml
 
+from tiltrov_ros.core.campaign.sampling import draw_sample
 from tiltrov_ros.core.campaign.spec import (
     ROBOT_ANGLE_KEYS,
     TIME_METRICS,
@@ -55,8 +56,11 @@ def load_campaign(path: str | Path) -> CampaignSpec:
 def parse_campaign(doc: Mapping[str, Any], *, source: str | None = None,
                    folder: Path | None = None) -> CampaignSpec:
     """A :class:`CampaignSpec` from a mapping; base scenario paths are relative to
-    ``folder`` (the campaign file's)."""
-    return _Parser(source, folder).campaign(doc)
+    ``folder`` (the campaign file's). Sample 0 is drawn and parsed as a scenario, so
+    what only the scenario parser knows (a term's keys) is checked too."""
+    spec = _Parser(source, folder).campaign(doc)
+    draw_sample(spec, 0).scenario(f'{spec.source} (sample 0)')
+    return spec
 
 
 # --------------------------------------------------------------------------- parsing
@@ -333,7 +337,7 @@ class _Parser:
             if metric not in numeric:
                 raise self.fail(f'{where}.metric', f'got {metric!r}; allowed: the keys of '
                                                    f'metrics.json: {", ".join(numeric)}')
-            select = {'controllers': [c.controller for c in configurations],
+            select = {'controllers': list(CONTROLLER_KINDS),
                       'allocators': [c.allocator for c in configurations],
                       'gains': [c.gains for c in configurations]}
             keys = (set(shape) | ({'position', 'angle'} if set(shape) == set(DOF_NAMES)
