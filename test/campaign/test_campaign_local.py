@@ -12,11 +12,13 @@ import sys
 
 from campaign_run import IDS, TINY, CampaignRun, read_rows, tiltrov_campaign
 import pytest
+import yaml
 
 from tiltrov_ros.campaign.execute import PINNED_THREADS, dask_client
+from tiltrov_ros.campaign.plan import Plan
 from tiltrov_ros.campaign.table import flatten, metric_columns, row_metrics
-from tiltrov_ros.campaign.worker import worker_environment
-from tiltrov_ros.core.campaign import draw_sample, load_campaign
+from tiltrov_ros.campaign.worker import run_one, worker_environment
+from tiltrov_ros.core.campaign import draw_sample, draw_samples, load_campaign
 from tiltrov_ros.core.controllers import DOF_NAMES
 from tiltrov_ros.core.metrics import metric_differences
 
@@ -121,3 +123,28 @@ def test_local_workers_are_processes_with_one_thread_and_blas_pinned() -> None:
     assert len(set(pids.values())) == 2 and os.getpid() not in pids.values()
     for env in environments.values():
         assert {k: env[k] for k in PINNED_THREADS} == PINNED_THREADS
+
+
+def test_a_gain_set_reaches_tiltrov_sim_through_the_exported_files(tmp_path: Path) -> None:
+    file = tmp_path / 'gains.yaml'
+    soft = {'kp': [30.0, 40.0, 50.0, 10.0, 20.0, 20.0], 'kd': [60.0, 80.0, 100.0, 8.0, 16.0, 16.0]}
+    file.write_text(yaml.safe_dump({**TINY, 'disturbances': {}, 'compare': {
+        'controllers': ['pd'], 'allocators': ['paper'], 'gains': {'shipped': {}, 'soft': soft}}}))
+    spec = load_campaign(file)
+    task = next(t for t in Plan(spec).tasks(draw_samples(spec, 1))
+                if t.configuration == 'pd-paper-soft')
+    assert task.config.controller.gains.kp == tuple(soft['kp'])
+    assert task.config.allocator.mode == 'paper'
+    expected = run_one(task).metrics
+    exported = tiltrov_campaign(file, '--out', tmp_path / 'out', '--export', task.run_id)
+    assert exported.returncode == 0, exported.stderr
+    folder = tmp_path / 'out' / 'runs' / task.run_id
+    env = {**os.environ, 'PATH': f'{Path(sys.executable).parent}{os.pathsep}{os.environ["PATH"]}'}
+    result = subprocess.run([str(folder / 'reproduce.sh'), '--no-figures'], env=env,
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    metrics = json.loads((folder / 'sim' / 'metrics.json').read_text())
+    assert metric_differences(metrics, expected, rtol=0.0, atol=0.0) == []
+    shipped = next(t for t in Plan(spec).tasks(draw_samples(spec, 1))
+                   if t.configuration == 'pd-paper-shipped')
+    assert run_one(shipped).metrics != expected          # the gains make a difference

@@ -22,7 +22,7 @@ def test_an_interrupted_campaign_resumes_without_losing_or_repeating_a_run(
         local_run: CampaignRun, tiny_file: Path, tmp_path: Path) -> None:
     out = tmp_path / 'out'
     table = out / 'runs.csv'
-    args = [str(tiny_file), '--out', str(out), '--samples', '60', '--batch-size', '1',
+    args = [str(tiny_file), '--out', str(out), '--samples', '30', '--batch-size', '1',
             '--workers', '2']
     # Its own session: Ctrl-C reaches the command and its workers, nothing else.
     proc = subprocess.Popen([sys.executable, '-m', 'tiltrov_ros.cli', 'campaign', *args],
@@ -42,19 +42,19 @@ def test_an_interrupted_campaign_resumes_without_losing_or_repeating_a_run(
     assert proc.returncode == 130, stdout + stderr
     before = table.read_text()
     done = read_rows(table)
-    assert 3 <= len(done) < 120
-    assert f'interrupted; {len(done)} of 120 runs are in {table}' in stderr
+    assert 3 <= len(done) < 60
+    assert f'interrupted; {len(done)} of 60 runs are in {table}' in stderr
     assert 'Traceback' not in stderr
 
     resumed = tiltrov_campaign(*args, '--resume')
     assert resumed.returncode == 0, resumed.stdout + resumed.stderr
-    assert f'120 runs; {len(done)} already in {table}' in resumed.stdout
+    assert f'60 runs; {len(done)} already in {table}' in resumed.stdout
     text = table.read_text()
     assert text.startswith(before)                       # nothing recorded was touched
     rows = read_rows(table)
     ids = [r['run_id'] for r in rows]
-    assert len(ids) == len(set(ids)) == 120              # none lost, none twice
-    assert {f's{i:05d}-{c}-robust' for i in range(60) for c in ('pd', 'pid')} == set(ids)
+    assert len(ids) == len(set(ids)) == 60              # none lost, none twice
+    assert {f's{i:05d}-{c}-robust' for i in range(30) for c in ('pd', 'pid')} == set(ids)
     # the samples of the tiny campaign's own run give the same rows
     first = [r for r in rows if r['run_id'] in IDS]
     assert comparable(first) == comparable(read_rows(local_run.out / 'runs.csv'))
