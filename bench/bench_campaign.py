@@ -11,8 +11,8 @@ The same runs (the first ``--samples`` samples of
 
 each through :func:`tiltrov_ros.campaign.execute.execute` with the default
 batch size, timed from the first submission to the last result (the
-cluster's start-up, with the workers' imports, is reported apart). The metrics of every run must be the
-same in the three, or the benchmark fails.
+cluster's start-up, with the workers' imports, is reported apart). The
+metrics of every run must be the same in the three, or the benchmark fails.
 
 Scheduling overhead per run, two ways:
 

@@ -107,6 +107,13 @@ def describe_bound(bound: Bound) -> str:
     return f'{bound.metric}: {"; ".join(parts)}' + (f' ({", ".join(scope)})' if scope else '')
 
 
+def _shorten(violations: str, most: int = 3) -> str:
+    """The first ``most`` missed bounds and how many more."""
+    parts = [p for p in violations.split('; ') if p]
+    more = f'; {len(parts) - most} more' if len(parts) > most else ''
+    return '; '.join(parts[:most]) + more
+
+
 def _fmt(value: float | None, digits: int = 1) -> str:
     return '-' if value is None else f'{value:.{digits}f}'
 
@@ -156,7 +163,7 @@ def write_summary(spec: CampaignSpec, rows: Sequence[Mapping[str, str]],
         for run_id in summary.worst:
             row = by_id[run_id]
             pos, att = final_position_error(row), final_attitude_error(row)
-            missed = row['error'] or row['violations'] or '-'
+            missed = row['error'] or _shorten(row['violations']) or '-'
             folder = exported.get(run_id)
             where = f'{folder.relative_to(out).as_posix()}/' if folder else '-'
             lines.append(f'| {run_id} | {row["status"]} | {row["holds"]} | '
