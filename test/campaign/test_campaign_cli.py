@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+import sys
 from typing import Any
 
 from campaign_run import TINY
@@ -27,6 +28,7 @@ def _file(tmp_path: Path, **changes: Any) -> Path:
     ({'robot': {'tilt_rate_limit': {'uniform': [-10, 100]}}}, ['--samples', '40'],
      "parameter 'robot.tilt_rate_limit' (in {file} (sample "),
     ({}, ['--samples', '0'], '--samples must be >= 1, got 0'),
+    ({}, ['--worst', '-1'], '--worst must be >= 0, got -1'),
     ({}, ['--export', 's0001-pd'], "--export: 's0001-pd' is not a run of this campaign"),
     ({}, ['--export', 's00001-pd'], "--export: 's00001-pd' is not a run of this campaign"),
 ])
@@ -49,3 +51,16 @@ def test_a_missing_file_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixtur
     assert code == 2
     assert capsys.readouterr().err == (f'tiltrov campaign: error: campaign file not found: '
                                        f'{tmp_path / "nope.yaml"}\n')
+
+
+def test_without_dask_the_command_says_what_to_install(tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str],
+                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, 'distributed', None)      # import distributed fails
+    monkeypatch.delitem(sys.modules, 'tiltrov_ros.campaign.execute', raising=False)
+    out = tmp_path / 'out'
+    code = main(['campaign', str(_file(tmp_path)), '--out', str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count('\n') == 1
+    assert err.startswith('tiltrov campaign: error: Dask is missing') and 'pip install' in err
+    assert not out.exists()

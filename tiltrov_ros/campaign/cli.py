@@ -24,6 +24,7 @@ from contextlib import contextmanager
 import hashlib
 import json
 from pathlib import Path
+import shutil
 import signal
 import sys
 import time
@@ -167,6 +168,7 @@ def _summarize(args: argparse.Namespace, spec: CampaignSpec, plan: Plan, samples
     by_id = {r['run_id']: r for r in rows}
     exported: dict[str, Path] = {}
     written: list[Path] = []
+    shutil.rmtree(out / 'worst', ignore_errors=True)    # an earlier summary's worst runs
     for summary in summaries:
         for run_id in summary.worst:
             row = by_id[run_id]
@@ -200,11 +202,19 @@ def _export(args: argparse.Namespace, spec: CampaignSpec, plan: Plan) -> list[Pa
     return written
 
 
+def _check_dask() -> None:
+    try:
+        import tiltrov_ros.campaign.execute  # noqa: F401
+    except ImportError as exc:
+        raise InputError(f'Dask is missing ({one_line(exc)}): pip install dask distributed '
+                         "(the package's campaign extra)") from exc
+
+
 def _run(args: argparse.Namespace) -> int:
-    for name in ('samples', 'workers', 'batch_size'):
+    for name, least in (('samples', 1), ('workers', 1), ('batch_size', 1), ('worst', 0)):
         value = getattr(args, name)
-        if value is not None and value < 1:
-            raise InputError(f'--{name.replace("_", "-")} must be >= 1, got {value}')
+        if value is not None and value < least:
+            raise InputError(f'--{name.replace("_", "-")} must be >= {least}, got {value}')
     try:
         spec = load_campaign(args.file)
         count = args.samples or spec.samples
@@ -212,6 +222,7 @@ def _run(args: argparse.Namespace) -> int:
         if args.export:
             print_written(_export(args, spec, plan), args.out)
             return 0
+        _check_dask()
         samples = draw_samples(spec, count)
         tasks = plan.tasks(samples)
         _check_out(spec, args.out, args.resume)

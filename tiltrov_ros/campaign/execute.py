@@ -27,6 +27,9 @@ import signal
 import threading
 from typing import Any
 
+import dask
+from distributed import Client, LocalCluster, as_completed
+
 from tiltrov_ros.campaign.plan import RunTask
 from tiltrov_ros.campaign.worker import RunResult, run_batch, worker_environment
 from tiltrov_ros.core.errors import CampaignError
@@ -54,8 +57,6 @@ def batches(tasks: Sequence[RunTask], size: int) -> list[list[RunTask]]:
 def dask_client(scheduler: str | None = None, workers: int | None = None) -> Iterator[Any]:
     """A connected ``distributed.Client``: to ``scheduler``, or to a LocalCluster of
     ``workers`` processes (default: one per core). Closed on exit."""
-    import dask
-    from distributed import Client, LocalCluster
 
     cluster = None
     if scheduler:
@@ -132,8 +133,6 @@ def execute(client: Any, tasks: Sequence[RunTask],
     """Run ``tasks`` on ``client``'s cluster in batches, calling ``on_results`` with each
     batch's results as it finishes. On an exception (Ctrl-C) the pending batches are
     cancelled and the exception goes on."""
-    from distributed import as_completed
-
     size = size or batch_size(len(tasks), worker_count(client))
     pending = {}
     for batch in batches(tasks, size):
