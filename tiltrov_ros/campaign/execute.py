@@ -37,7 +37,7 @@ from tiltrov_ros.core.errors import CampaignError
 #: Environment of local worker processes: numpy's BLAS single-threaded, so one
 #: process per core does not oversubscribe the cores.
 PINNED_THREADS = {'OMP_NUM_THREADS': '1', 'OPENBLAS_NUM_THREADS': '1', 'MKL_NUM_THREADS': '1'}
-#: At most this many runs per task (a 60 s run takes 0.3-2 s).
+#: At most this many runs per task (a 60 s run takes one to a few seconds).
 MAX_BATCH = 8
 #: Seconds to wait for an external scheduler and for its first worker.
 CONNECT_TIMEOUT = 30.0
