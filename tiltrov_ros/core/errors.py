@@ -30,6 +30,10 @@ class ScenarioError(TiltrovError, ValueError):
     """A scenario file or scenario description is invalid."""
 
 
+class CampaignError(TiltrovError, ValueError):
+    """A campaign file is invalid (the message names the file and the key)."""
+
+
 class AllocationError(TiltrovError, ValueError):
     """An allocation request is malformed (wrong shape, non-finite values)."""
 
