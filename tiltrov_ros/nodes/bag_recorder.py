@@ -62,7 +62,8 @@ from tiltrov_ros.bag.writer import COMPRESSIONS, BagWriter
 from tiltrov_ros.core.errors import BagError, ParameterError, TiltrovError
 from tiltrov_ros.core.names import CLOCK, RECORDER, STACK_TOPICS
 from tiltrov_ros.core.paramtable import UNSET, Param, ParamTable
-from tiltrov_ros.core.timebase import cdr_stamp_ns
+from tiltrov_ros.core.timebase import cdr_stamp
+from tiltrov_ros.core.validation import InvalidInput, checked_stamp_ns
 
 from .base import TiltrovNode
 from .parameters import Overrides, check, declare
@@ -191,6 +192,7 @@ class BagRecorder(TiltrovNode):
         self.output = self._bag.path
         self._use_sim_time = bool(self.get_parameter('use_sim_time').value)
         self._clock_ns = 0
+        self._bad_clock = 0         # /clock samples that were not a time
         self._clock_topic: _Topic | None = None
         self._topics: dict[str, _Topic] = {}
         self._skipped: set[str] = set()
@@ -327,7 +329,7 @@ class BagRecorder(TiltrovNode):
             return
         topic.received += 1
         if topic is self._clock_topic:
-            self._clock_ns = cdr_stamp_ns(data)
+            self._take_clock(data)
             log_time = self._clock_ns
         elif self._clock_topic is not None:
             self._drain(self._clock_topic, limit=_DRAIN_LIMIT)  # /clock before later data
@@ -340,6 +342,19 @@ class BagRecorder(TiltrovNode):
             topic.connection = self._add_connection(topic)
         if self._bag.write(topic.connection, log_time, data):
             self._log_flushed()
+
+    def _take_clock(self, data: bytes) -> None:
+        """Log time from a /clock sample: a malformed one (no stamp, ``sec < 0``,
+        ``nanosec >= 1e9``) is recorded as it came but leaves the log time at the
+        last good sample (counted, logged); a sample earlier than the last moves
+        the log time back with it (time starts over: nodes/simclock.py)."""
+        try:
+            self._clock_ns = checked_stamp_ns(*cdr_stamp(data))
+        except (InvalidInput, ValueError) as exc:
+            self._bad_clock += 1
+            self.get_logger().warning(
+                f'/clock sample not a time ({exc}; {self._bad_clock} so far): logged at the '
+                'last good one', throttle_duration_sec=_THROTTLE)
 
     def _add_connection(self, topic: _Topic) -> Connection:
         """The topic's bag connection, with its publishers' QoS (from the graph now,

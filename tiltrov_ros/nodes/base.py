@@ -34,6 +34,7 @@ from tiltrov_ros.core.validation import InvalidInput, StampBounds
 from .conversions import message_is_finite
 from .parameters import Overrides, allowed_text, as_parameters, declare, parameter_source
 from .qos import RELIABLE_QOS
+from .simclock import install as install_time_source
 
 #: s: repeated warnings from callbacks are throttled to one per this period.
 THROTTLE = 5.0
@@ -190,6 +191,9 @@ class TiltrovNode(Node):
     #: The stack's nodes publish /diagnostics and may hold their outputs for the
     #: recorder (:data:`RECORDER_HOLD`); the recorder itself does neither.
     stack_node: ClassVar[bool] = True
+    #: The node subscribes to /clock itself and rejects bad samples there (the time
+    #: source then drops them without counting them a second time).
+    reads_clock: ClassVar[bool] = False
 
     def __init__(self, node_name: str, *, namespace: str | None = None,
                  context: Context | None = None, cli_args: Sequence[str] | None = None,
@@ -214,6 +218,8 @@ class TiltrovNode(Node):
         self._reject_log: dict[tuple[str, str], tuple[int, int]] = {}
         self._rejected_at_last_report = 0
         self._safe_publishers: list[SafePublisher] = []
+        #: rclpy's time source with each /clock sample checked (nodes/simclock.py).
+        self.time_source = install_time_source(self)
         # Lockstep with a recorder (the launcher sets it with --record): hold this
         # node's outputs, in order, until the recorder reads every one of its topics.
         # The stack's writers are VOLATILE, so what goes out before the recorder has
@@ -257,7 +263,19 @@ class TiltrovNode(Node):
     def on_rejected(self, topic: str, bad: InvalidInput, stamp: int | None) -> None:
         """Called after a message of ``topic`` was rejected; ``stamp`` is its stamp (ns)
         when the stamp itself was valid, else None. Subclasses answer a rejected
-        tick with their safe command here."""
+        tick with their safe command here, stamped by :meth:`safe_stamp`, and change
+        nothing else (no state, no cached answer)."""
+
+    def safe_stamp(self, stamp: int, newest_valid: int | None, period: int) -> int:
+        """The stamp of the safe answer to a rejected message stamped ``stamp``: never
+        later than the node's own last good time, so that a rejected message cannot
+        push a stamp ahead of the real ones (downstream nodes keep the latest command
+        by stamp). That time is the node's clock (sim time); while it is unknown, the
+        newest valid input's stamp ``newest_valid`` plus one control ``period``."""
+        now = self.clock_ns()
+        if now is None and newest_valid is not None:
+            now = newest_valid + period
+        return stamp if now is None else min(stamp, now)
 
     # -- input validation -------------------------------------------------------
 
@@ -436,6 +454,8 @@ class TiltrovNode(Node):
             message = f'{message}; {unsafe} non-finite output(s) withheld'
         values = {**values, 'callback_errors': self.callback_errors,
                   'rejected_messages': rejected}
+        if self.on_sim_time():
+            values['clock_jumps_back'] = self.time_source.jumps_back
         values.update({f'rejected.{topic}.{reason}': n
                        for (topic, reason), n in sorted(self.rejections.items())})
         values.update({f'unsafe_outputs.{topic}': n for topic, n in sorted(self.unsafe.items())})

@@ -229,10 +229,17 @@ class PlantSimulator(TiltrovNode):
         self._advance()
 
     def on_rejected(self, topic: str, bad: InvalidInput, stamp: int | None) -> None:
-        """A rejected command leaves the previous one in force. In lockstep one with a
-        valid stamp still answers its tick (the run goes on); a bad stamp answers none."""
-        if self.lockstep and stamp is not None and not self.finished.done():
-            self._hold(stamp, 0 if topic == THRUST_CMD else 1, _REJECTED)
+        """A rejected command leaves the previous one in force. In lockstep one stamped
+        with the tick the plant waits at answers that tick, unless a valid one already
+        did (the run goes on); one stamped ahead answers nothing, so that it cannot
+        stand in for a valid command not yet arrived; a bad stamp answers none."""
+        if (not self.lockstep or stamp is None or self.finished.done()
+                or stamp != self.plant.time_ns):
+            return
+        kind = 0 if topic == THRUST_CMD else 1
+        entry = self._pending.get(stamp)
+        if entry is None or entry[kind] is None:
+            self._hold(stamp, kind, _REJECTED)
 
     def _command(self, kind: int, values: list[float]) -> None:
         if kind == 0:

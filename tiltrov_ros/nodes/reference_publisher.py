@@ -63,6 +63,8 @@ HOLD_ORIGIN = ReferenceProfile(((),) * 6)
 class ReferencePublisher(TiltrovNode):
     """Publishes the reference at every control tick (see the module docstring)."""
 
+    reads_clock = True      # its own /clock reader rejects and counts bad samples
+
     def __init__(self, *, node_name: str = REFERENCE, namespace: str | None = None,
                  context: Any = None, cli_args: Sequence[str] | None = None,
                  parameter_overrides: Overrides = None) -> None:

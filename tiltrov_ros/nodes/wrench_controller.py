@@ -260,6 +260,12 @@ class WrenchController(TiltrovNode):
         ns = self.check_header(msg.header, FRAME_EARTH)
         if ns % self.period_ns:
             return
+        # Validated whole before it may act: a rejected message changes nothing.
+        check_frame(msg.child_frame_id, FRAME_BODY, 'child_frame_id')
+        position, quaternion, nu = odometry_arrays(msg)
+        check_finite(position, 'position')
+        check_quaternion(quaternion)
+        check_finite(nu, 'twist')
         if ns == self._last_ns and self._last_msgs is not None:
             self.republished += 1
             self._publish(*self._last_msgs)
@@ -267,11 +273,6 @@ class WrenchController(TiltrovNode):
         if ns < self._last_ns:
             self._reset(f'odometry went back from {format_ns(self._last_ns)} to '
                         f'{format_ns(ns)}')
-        check_frame(msg.child_frame_id, FRAME_BODY, 'child_frame_id')
-        position, quaternion, nu = odometry_arrays(msg)
-        check_finite(position, 'position')
-        check_quaternion(quaternion)
-        check_finite(nu, 'twist')
         now = self.steady_ns()
         self.odom_watchdog.fresh(ns, now)
         self._tick = _Tick(ns, position, quaternion, nu, now)
@@ -363,12 +364,24 @@ class WrenchController(TiltrovNode):
         self._answer(ns, ControlOutput(np.zeros(6), self._safe_tilts, 'safe'))
 
     def on_rejected(self, topic: str, bad: InvalidInput, stamp: int | None) -> None:
-        """A rejected odometry tick with a valid stamp is answered with a zero wrench
-        (the state is unknown; the plant waits for that stamp in lockstep)."""
-        if (topic == ODOM and stamp is not None and stamp % self.period_ns == 0
-                and stamp != self._last_ns):
-            self._tick = None
-            self._publish_safe(stamp)
+        """A rejected odometry tick with a valid stamp, later than the last answered and
+        not waiting, is answered with a zero wrench (the state is unknown; the plant waits for that
+        stamp in lockstep), stamped no later than the node's clock (:meth:`safe_stamp`)
+        and not kept as the tick's answer: a valid odometry of the tick afterwards is
+        answered as usual, and nothing else changes."""
+        if (topic != ODOM or stamp is None or stamp % self.period_ns
+                or stamp <= self._last_ns or (self._tick is not None and self._tick.ns == stamp)):
+            return
+        seen = self.odom_watchdog.seen
+        self.safe_answers += 1
+        self._publish_zero(self.safe_stamp(stamp, seen[0] if seen else None, self.period_ns))
+
+    def _publish_zero(self, ns: int) -> None:
+        """A zero wrench (and the last finite tilt request) stamped ``ns``, not kept as
+        the answer of a tick."""
+        self._publish(fill_wrench(new_wrench(), ns, np.zeros(6)),
+                      None if self._tilt_pub is None else fill_joint_state(
+                          new_joint_state(TILTS), ns, position=self._safe_tilts))
 
     @guarded
     def _odom_watchdog(self) -> None:
@@ -378,10 +391,7 @@ class WrenchController(TiltrovNode):
         if seen is None:
             return
         self.watchdog_outputs += 1
-        ns = self.estimated_now_ns(*seen, self.period_ns)
-        self._publish(fill_wrench(new_wrench(), ns, np.zeros(6)),
-                      None if self._tilt_pub is None else fill_joint_state(
-                          new_joint_state(TILTS), ns, position=self._safe_tilts))
+        self._publish_zero(self.estimated_now_ns(*seen, self.period_ns))
 
     def _reset(self, why: str) -> None:
         self.resets += 1
