@@ -1,0 +1,254 @@
+"""Attacks on a running stack, as a faulty peer makes them: real processes started by
+``tiltrov launch``, real DDS, a test node publishing what a buggy simulator, a bad
+replay or a stray tool would (docs/reliability.md, "Attacks")."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import time
+from typing import Any
+
+from geometry_msgs.msg import WrenchStamped
+from nav_msgs.msg import Odometry
+import pytest
+from ros_stack import (
+    KEEP_ALL,
+    LaunchProcess,
+    Probe,
+    diagnostics,
+    joint_state,
+    odometry,
+    ready,
+    wrench,
+)
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+
+from tiltrov_ros.core.names import ALLOCATOR, CONTROLLER, PLANT, REFERENCE
+from tiltrov_ros.core.timebase import NS_PER_S
+from tiltrov_ros.nodes.conversions import stamp_ns
+from tiltrov_ros.paths import config_file
+
+STACK = (ALLOCATOR, CONTROLLER, REFERENCE, PLANT)
+#: The nodes on sim time (the plant is the clock).
+ON_SIM_TIME = (ALLOCATOR, CONTROLLER, REFERENCE)
+TICK = 50_000_000       # ns: the control period
+
+
+def _count(probe: Probe, node: str, key: str) -> int:
+    return int(diagnostics(probe, node).get(key, '0'))
+
+
+def _stepping(probe: Probe) -> bool:
+    """The plant is past t = 0 (every reader of its topics is there)."""
+    return float(diagnostics(probe, PLANT).get('sim_time', 0.0)) > 0.0
+
+
+def _stop(launch: LaunchProcess) -> int:
+    launch.process.send_signal(signal.SIGINT)
+    return launch.finish(timeout=60)
+
+
+# --------------------------------------------------------------------------- /clock
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize('single_process', [False, True], ids=['processes', 'single_process'])
+def test_a_clock_sample_with_a_negative_second_is_rejected_by_every_node(
+        ros: Any, tmp_path: Path, single_process: bool) -> None:
+    """One /clock message with sec = -1 (a bad replay, a buggy simulator): every node on
+    sim time rejects and counts it and runs on; the recorder logs it at the last good
+    time and closes a bag that opens without repair."""
+    from tiltrov_ros.bag.bagfile import bag_info
+    from tiltrov_ros.bag.repair import problem
+
+    bag = tmp_path / 'bag'
+    launch = LaunchProcess(tmp_path, '--realtime', '--duration', '600', '--record', str(bag),
+                           *(['--single-process'] if single_process else []))
+    try:
+        launch.wait_running()
+        probe = ready(ros, STACK, until=_stepping)
+        attacker = ros.node('clock_attacker')
+        pub = attacker.create_publisher(Clock, '/clock', KEEP_ALL)
+        bad = Clock()
+        bad.clock.sec, bad.clock.nanosec = -1, 0
+
+        def every_node_rejected_one() -> bool:
+            # rclpy's /clock reader keeps one sample, best effort: a sample may be
+            # overwritten by the plant's before it is taken; send until counted.
+            pub.publish(bad)
+            return all(_count(probe, n, 'rejected./clock.bad_stamp') >= 1
+                       for n in ON_SIM_TIME)
+
+        assert ros.spin_until(every_node_rejected_one, timeout=30.0), launch.output
+        assert ros.spin_until(lambda: _stepping(probe) and all(
+            _count(probe, n, 'callback_errors') == 0 for n in STACK))
+        assert launch.process.poll() is None, launch.output
+        assert _stop(launch) == 130, launch.output
+    finally:
+        launch.cleanup()
+    assert 'died' not in launch.output and 'Traceback' not in launch.output, launch.output
+    assert problem(bag) is None
+    info = bag_info(bag)
+    assert info.topics['/clock'].count > 0 and info.end_ns >= info.start_ns >= 0
+
+
+# --------------------------------------------------------------------------- rejected input
+
+
+def _latest_clock(probe: Probe) -> int:
+    return stamp_ns(probe['/clock'][-1].clock)
+
+
+def _nan_odom(ns: int) -> Odometry:
+    return odometry(ns, [math.nan, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0], [0.0] * 6)
+
+
+@pytest.mark.slow
+def test_rejected_odometry_stamped_ahead_does_not_take_control(ros: Any,
+                                                               tmp_path: Path) -> None:
+    """NaN odometry stamped 0.45 s ahead of /clock, every 0.4 s for 5 s (realtime): each
+    is rejected, and the robot holds its depth on the real commands (before: the safe
+    answer carried the future stamp, the plant dropped the real commands, thrust fell
+    to zero and the robot sank 380 mm)."""
+    launch = LaunchProcess(tmp_path, '--realtime', '--duration', '600')
+    try:
+        launch.wait_running()
+        probe = ready(ros, STACK, until=_stepping)
+        watch = Probe(ros.node('depth_probe'), ['odom', '/clock'])
+        attacker = ros.node('odom_attacker')
+        pub = attacker.create_publisher(Odometry, 'odom', KEEP_ALL)
+        assert ros.spin_until(lambda: len(watch['/clock']) > 0 and len(watch['odom']) > 0
+                              and pub.get_subscription_count() > 1)   # controller, probe
+        start = _latest_clock(watch)
+        sent = 0
+        next_at = start
+
+        def attack() -> bool:
+            nonlocal sent, next_at
+            now = _latest_clock(watch)
+            if now >= next_at and sent < 13:      # a control tick 0.40-0.45 s ahead
+                pub.publish(_nan_odom((now + 450_000_000) // TICK * TICK))
+                sent += 1
+                next_at = now + 400_000_000
+            return sent == 13 and now >= start + 5 * NS_PER_S
+
+        assert ros.spin_until(attack, timeout=60.0), launch.output
+        assert ros.spin_until(lambda: _count(probe, CONTROLLER, 'rejected_messages') >= 13)
+        depths = [(stamp_ns(m.header.stamp), m.pose.pose.position.z) for m in watch['odom']
+                  if math.isfinite(m.pose.pose.position.x)]
+        during = [z for t, z in depths if t > start]
+        before = [z for t, z in depths if t <= start][-1]
+        assert max(abs(z - before) for z in during) < 0.02, (before, max(during))
+        assert _count(probe, CONTROLLER, 'resets') == 0
+        assert _count(probe, ALLOCATOR, 'resets') == 0
+    finally:
+        launch.cleanup()
+
+
+@pytest.mark.slow
+def test_rejected_odometry_stamped_back_resets_nothing(ros: Any, tmp_path: Path) -> None:
+    """NaN odometry stamped 1 s back (a control tick): rejected before anything acts on
+    it (before: the controller reset first, losing the PID integral, and the reset
+    cascaded into the allocator)."""
+    launch = LaunchProcess(tmp_path, '--realtime', '--duration', '600', '--controller', 'pid')
+    try:
+        launch.wait_running()
+        probe = ready(ros, STACK, until=_stepping)
+        watch = Probe(ros.node('clock_probe'), ['/clock'])
+        pub = ros.node('odom_attacker').create_publisher(Odometry, 'odom', KEEP_ALL)
+        assert ros.spin_until(lambda: len(watch['/clock']) > 0
+                              and pub.get_subscription_count() > 0
+                              and _latest_clock(watch) > 2 * NS_PER_S)
+        back = (_latest_clock(watch) - NS_PER_S) // TICK * TICK
+        pub.publish(_nan_odom(back))
+        assert ros.spin_until(
+            lambda: _count(probe, CONTROLLER, 'rejected.odom.non_finite') == 1, timeout=30.0)
+        before = len(probe['/diagnostics'])
+        assert ros.spin_until(lambda: len(probe['/diagnostics']) > before + 8)
+        assert _count(probe, CONTROLLER, 'resets') == 0
+        assert _count(probe, ALLOCATOR, 'resets') == 0
+        assert 'resetting' not in launch.output and 'forgetting' not in launch.output
+    finally:
+        launch.cleanup()
+
+
+# --------------------------------------------------------------------------- tilt_request
+
+
+def _node_process(node: str, *ros_args: str) -> subprocess.Popen[str]:
+    """``node`` started as ``ros2 run`` starts it: the shipped YAML files."""
+    return subprocess.Popen(
+        [sys.executable, '-m', f'tiltrov_ros.nodes.{node}', '--ros-args',
+         '--params-file', str(config_file('robot.yaml')),
+         '--params-file', str(config_file(f'{node}.yaml')), *ros_args],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+
+def _ended(process: subprocess.Popen[str]) -> str:
+    """Stop ``process`` (SIGINT, then SIGKILL) and return its output."""
+    if process.poll() is None:
+        process.send_signal(signal.SIGINT)
+        try:
+            process.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            process.kill()
+    out, _ = process.communicate(timeout=20)
+    return out
+
+
+@pytest.mark.slow
+def test_a_stray_tilt_request_publisher_does_not_silence_the_allocator(ros: Any) -> None:
+    """The allocator as shipped (``tilt_request: auto``) under wrenches at 20/s; a stray
+    tool creates a tilt_request publisher and sends one request: the wrenches are
+    still answered, and /diagnostics names the sender (before: thrust_cmd stopped for
+    good, each new wrench replacing the one waiting, diagnostics OK)."""
+    process = _node_process(ALLOCATOR)
+    try:
+        node = ros.node('wrench_source')
+        probe = Probe(node, ['thrust_cmd', '/diagnostics'])
+        pub = node.create_publisher(WrenchStamped, 'wrench_cmd', KEEP_ALL)
+        assert ros.spin_until(lambda: pub.get_subscription_count() > 0
+                              and bool(diagnostics(probe, ALLOCATOR)), timeout=30.0)
+        sent: list[int] = []
+        next_at = time.monotonic()
+
+        def send(n: int) -> Any:
+            """Publish n more wrenches at 20/s (wall), stamped 50 ms apart."""
+            goal = len(sent) + n
+
+            def step() -> bool:
+                nonlocal next_at
+                if len(sent) < goal and time.monotonic() >= next_at:
+                    sent.append(len(sent) * TICK)
+                    pub.publish(wrench(sent[-1], [0.0, 0.0, 5.0, 0.0, 0.0, 0.0]))
+                    next_at += 1.0 / 20
+                return len(sent) == goal
+            return step
+
+        assert ros.spin_until(send(20), timeout=30.0)
+        assert ros.spin_until(lambda: len(probe['thrust_cmd']) == 20)
+        stray = ros.node('tilt_stray').create_publisher(JointState, 'tilt_request', KEEP_ALL)
+        assert ros.spin_until(lambda: stray.get_subscription_count() > 0)
+        stray.publish(joint_state(123 * NS_PER_S, ['tilt_front', 'tilt_rear'],
+                                  position=[0.5, 0.5]))
+        assert ros.spin_until(send(40), timeout=30.0)
+        assert ros.spin_until(lambda: set(probe.stamps('thrust_cmd')) >= set(sent),
+                              timeout=10.0), (len(probe['thrust_cmd']), len(sent))
+
+        def says_why() -> bool:
+            values = diagnostics(probe, ALLOCATOR)
+            return (values.get('tilt_requests_received') == '1'
+                    and '/tilt_stray' in values.get('_message', ''))
+
+        assert ros.spin_until(says_why, timeout=10.0)
+        values = diagnostics(probe, ALLOCATOR)
+        assert values['_level'] == '1' and 'ignored' in values['_message']
+        assert values['dropped_wrenches'] == '0' and values['tilt_request_pairing'] == 'free'
+    finally:
+        out = _ended(process)
+    assert 'Traceback' not in out, out
