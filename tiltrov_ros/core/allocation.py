@@ -268,10 +268,13 @@ class AllocatorConfig:
             raise ParameterError('max_tilt_step', f'got {step!r}; allowed: a number of rad '
                                  '(<= 0: the servo reach per control period)', source=source)
         weights = values.get('weights', DEFAULT_WEIGHTS)
-        if (not isinstance(weights, (list, tuple)) or len(weights) != 6
+        # Any sequence: a list from YAML, array('d') from the ROS parameter service.
+        if (isinstance(weights, (str, bytes)) or not isinstance(weights, Sequence)
+                or len(weights) != 6
                 or not all(isinstance(w, (int, float)) and not isinstance(w, bool)
                            and math.isfinite(w) and w > 0 for w in weights)):
-            raise ParameterError('weights', f'got {weights!r}; allowed: 6 finite numbers > 0',
+            shown = list(weights) if isinstance(weights, Sequence) else weights
+            raise ParameterError('weights', f'got {shown!r}; allowed: 6 finite numbers > 0',
                                  source=source)
         return cls(mode, float(step), tuple(float(w) for w in weights))
 

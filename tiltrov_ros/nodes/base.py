@@ -220,6 +220,7 @@ class TiltrovNode(Node):
         self._safe_publishers: list[SafePublisher] = []
         #: rclpy's time source with each /clock sample checked (nodes/simclock.py).
         self.time_source = install_time_source(self)
+        self.add_on_set_parameters_callback(self._refuse_fixed)
         # Lockstep with a recorder (the launcher sets it with --record): hold this
         # node's outputs, in order, until the recorder reads every one of its topics.
         # The stack's writers are VOLATILE, so what goes out before the recorder has
@@ -480,6 +481,20 @@ class TiltrovNode(Node):
         unknown = sorted(name for name in given if not self.has_parameter(name))
         if unknown:
             self.get_logger().warning(f'ignoring unknown parameter(s): {", ".join(unknown)}')
+
+    def _refuse_fixed(self, parameters: list[Parameter]) -> SetParametersResult:
+        """Run-time changes no node of the package applies, refused with the reason:
+        deleting a parameter (``ros2 param delete``: rclpy would undeclare it, and every
+        later set would fail until a restart) and ``use_sim_time`` (each node chose
+        its time source, subscriptions and timers at start)."""
+        for p in parameters:
+            if p.type_ == Parameter.Type.NOT_SET and self.has_parameter(p.name):
+                return self.reject(f'{p.name} cannot be deleted (set a value instead)')
+            if p.name == 'use_sim_time' and self.has_parameter('use_sim_time') and (
+                    p.value != self.get_parameter('use_sim_time').value):
+                return self.reject('use_sim_time is fixed at start (restart the node to '
+                                   'change it)')
+        return SetParametersResult(successful=True)
 
     def reject(self, reason: str) -> SetParametersResult:
         self.get_logger().warning(f'parameter change rejected: {reason}')

@@ -246,6 +246,8 @@ class ThrustAllocatorNode(TiltrovNode):
         for p in parameters:
             if p.name == 'wrench_timeout':
                 self.wrench_timeout = float(p.value)
+            elif p.name == 'input_timeout':
+                self.input_timeout = float(p.value)
             elif p.name == 'failed_thrusters':
                 self.failed_param = failed_thruster_indices(p.value)
                 self._use_failed(self._wanted_failed(self._last_ns if self._last_ns >= 0

@@ -239,6 +239,8 @@ class WrenchController(TiltrovNode):
         for p in parameters:
             if p.name == 'odom_timeout':
                 self.odom_timeout = float(p.value)
+            elif p.name == 'input_timeout':
+                self.input_timeout = float(p.value)
         if not any(p.name.startswith(('gains.', 'switching.')) for p in parameters):
             return
         self.controller_config = ControllerConfig.from_mapping(
