@@ -252,3 +252,65 @@ def test_a_stray_tilt_request_publisher_does_not_silence_the_allocator(ros: Any)
     finally:
         out = _ended(process)
     assert 'Traceback' not in out, out
+
+
+# --------------------------------------------------------------------------- parameter files
+
+#: Files no parameter reader can use, as a user may give them by mistake.
+BAD_FILES: dict[str, Any] = {
+    'missing': None,
+    'not_yaml': 'a: [1, 2\nb: {\n',
+    'random_bytes': bytes(range(256)) * 4,
+    'top_level_list': '- 1\n- 2\n',
+    'alias_bomb': ''.join(f'l{i}: &l{i} [{", ".join([f"*l{i - 1}"] * 9) if i else "x"}]\n'
+                          for i in range(9)),
+}
+NODE_MODULES = ('plant_simulator', 'wrench_controller', 'thrust_allocator',
+                'reference_publisher', 'bag_recorder')
+
+
+def _bad_file(tmp_path: Path, kind: str) -> Path:
+    path = tmp_path / f'{kind}.yaml'
+    content = BAD_FILES[kind]
+    if isinstance(content, bytes):
+        path.write_bytes(content)
+    elif content is not None:
+        path.write_text(content)
+    return path
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize('kind', sorted(BAD_FILES))
+@pytest.mark.parametrize('node', NODE_MODULES)
+def test_an_unreadable_parameter_file_stops_a_node_with_one_line(
+        tmp_path: Path, node: str, kind: str) -> None:
+    path = _bad_file(tmp_path, kind)
+    result = subprocess.run(
+        [sys.executable, '-m', f'tiltrov_ros.nodes.{node}', '--ros-args', '--params-file',
+         str(path), '-p', f'output:={tmp_path / "bag"}'],
+        capture_output=True, text=True, timeout=60, cwd=tmp_path)
+    assert result.returncode == 1
+    assert result.stdout == ''
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith(
+        f'{node}: cannot read parameter file {path}: '), result.stderr
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(('args', 'message', 'code'), [
+    (('--scenario', '{random_bytes}'), 'cannot read {random_bytes}: not UTF-8 text', 2),
+    (('--scenario', '{not_yaml}'), 'cannot read {not_yaml}: not valid YAML: ', 2),
+    (('--param', 'wrench_controller:gains.kp:=[1,'),
+     '--param wrench_controller:gains.kp:=[1,: the value is not YAML', 2),
+], ids=['scenario_random_bytes', 'scenario_not_yaml', 'param_not_yaml'])
+def test_tiltrov_launch_names_an_unreadable_input_in_one_line(
+        tmp_path: Path, args: tuple[str, ...], message: str, code: int) -> None:
+    files = {kind: _bad_file(tmp_path, kind) for kind in ('random_bytes', 'not_yaml')}
+    result = subprocess.run(
+        [sys.executable, '-m', 'tiltrov_ros.cli', 'launch', '--duration', '1',
+         *(a.format(**files) for a in args)],
+        capture_output=True, text=True, timeout=60, cwd=tmp_path)
+    assert result.returncode == code
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith(
+        f'tiltrov launch: {message.format(**files)}'), result.stderr

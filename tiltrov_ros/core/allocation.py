@@ -102,11 +102,11 @@ from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-import yaml
 
 from tiltrov_ros.core.errors import AllocationError, ParameterError
 from tiltrov_ros.core.params import RobotParams
 from tiltrov_ros.core.thrust_map import allocation_matrix, thrust_wrench
+from tiltrov_ros.core.yamlfile import read_yaml
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -302,8 +302,7 @@ def load_allocator_config(path: str | Path | None = None) -> AllocatorConfig:
         from tiltrov_ros.paths import config_file
         path = config_file(ALLOCATOR_YAML)
     source = str(path)
-    with Path(path).open(encoding='utf-8') as stream:
-        document = yaml.safe_load(stream)
+    document = read_yaml(path)
     section = document.get('thrust_allocator') if isinstance(document, Mapping) else None
     params = section.get('ros__parameters') if isinstance(section, Mapping) else None
     if not isinstance(params, Mapping):

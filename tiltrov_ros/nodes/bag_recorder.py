@@ -66,6 +66,7 @@ from tiltrov_ros.core.timebase import cdr_stamp
 from tiltrov_ros.core.validation import InvalidInput, checked_stamp_ns
 
 from .base import TiltrovNode
+from .executors import init
 from .parameters import Overrides, check, declare
 
 VERSION_KEY = 'tiltrov.version'
@@ -498,7 +499,8 @@ def main(args: list[str] | None = None) -> int:
     # ends cleanly) and chain to the previous handler: for SIGINT, Python's,
     # which would raise KeyboardInterrupt anywhere, even inside a bag write.
     signal.signal(signal.SIGINT, lambda signum, frame: None)
-    rclpy.init(args=args)
+    if not init(args, RECORDER):
+        return 1
     # Created now, while the context is valid: a signal may come during start-up.
     executor = SingleThreadedExecutor()
     node: BagRecorder | None = None

@@ -4,17 +4,19 @@ from __future__ import annotations
 
 from collections.abc import Callable
 import os
+import re
 import sys
 
 import rclpy
 from rclpy.context import Context
-from rclpy.exceptions import ParameterException
+from rclpy.exceptions import InvalidNamespaceException, InvalidNodeNameException, ParameterException
 from rclpy.executors import (
     Executor,
     ExternalShutdownException,
     MultiThreadedExecutor,
     SingleThreadedExecutor,
 )
+import rclpy.logging
 from rclpy.task import Future
 
 from tiltrov_ros.core.errors import ParameterError, TiltrovError
@@ -23,12 +25,57 @@ from .base import TiltrovNode
 from .parameters import parameter_source
 
 #: Errors that stop a node at start-up with a message and exit code 1.
-STARTUP_ERRORS = (TiltrovError, ParameterException, ValueError, FileNotFoundError)
+STARTUP_ERRORS = (TiltrovError, ParameterException, ValueError, OSError,
+                  InvalidNodeNameException, InvalidNamespaceException)
 
 
 #: Executors the nodes can spin on (environment variable TILTROV_EXECUTOR).
 EXECUTORS = ('events', 'single', 'multi')
 DEFAULT_EXECUTOR = 'events'
+
+
+#: rcl's "Couldn't parse params file" error: the file and the parser's reason.
+_PARAMS_FILE_ERROR = re.compile(r"params file: '--params-file (?P<path>.*?)'\. Error: (?P<why>.*)",
+                                re.S)
+#: rcl's source locations appended to its messages (``, at /path/file.c:123``).
+_RCL_LOCATION = re.compile(r',? at \S+:\d+')
+
+
+def rcl_error_line(exc: Exception) -> str:
+    """One line for an error of ``rclpy.init`` (arguments rcl cannot use): the
+    parameter file and why it cannot be read, or rcl's message without its source
+    locations."""
+    text = ' '.join(_RCL_LOCATION.sub('', str(exc)).split())
+    text = text.removeprefix('failed to initialize rcl: ')
+    match = _PARAMS_FILE_ERROR.search(text)
+    if match is None:
+        return text
+    path, why = match['path'], match['why'].rstrip(' .,')
+    if not os.path.exists(path):
+        why = 'no such file'
+    elif not os.access(path, os.R_OK) or os.path.isdir(path):
+        why = 'not a readable file'
+    return f'cannot read parameter file {path}: {why}'
+
+
+def init(args: list[str] | None, name: str) -> bool:
+    """``rclpy.init(args)``; on arguments rcl refuses (an unreadable parameter file,
+    a malformed ``-p``) print one line naming the node and the file and return False.
+
+    rcl's own log line about it ("Failed to parse global arguments") is silenced:
+    the line printed here says more.
+    """
+    previous = rclpy.logging.get_logger_level('rcl')
+    rclpy.logging.set_logger_level('rcl', rclpy.logging.LoggingSeverity.FATAL)
+    try:
+        rclpy.init(args=args)
+    except (RuntimeError, ValueError) as exc:   # rclpy's RCLError is a RuntimeError
+        print(f'{name}: {rcl_error_line(exc)}', file=sys.stderr, flush=True)
+        return False
+    finally:
+        if rclpy.logging.get_logger_level('rcl') == rclpy.logging.LoggingSeverity.FATAL:
+            rclpy.logging.set_logger_level('rcl', previous)   # not set by --log-level
+    return True
 
 
 def make_executor(context: Context | None = None, kind: str | None = None) -> Executor:
@@ -79,7 +126,8 @@ def main_loop(factory: Callable[[], TiltrovNode], args: list[str] | None, name: 
     naming the node and gives exit code 1; Ctrl-C (the context shut down by
     rclpy's signal handler) gives 0.
     """
-    rclpy.init(args=args)
+    if not init(args, name):
+        return 1
     context = rclpy.get_default_context()
     node: TiltrovNode | None = None
     executor: Executor | None = None

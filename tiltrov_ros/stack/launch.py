@@ -8,12 +8,12 @@ import sys
 import tempfile
 from typing import IO
 
-from tiltrov_ros.core.errors import TiltrovError
+from tiltrov_ros.core.errors import TiltrovError, UnreadableFileError
 from tiltrov_ros.core.names import normalize_namespace
 
 from .inprocess import run_single_process
 from .specs import LaunchError, LaunchOptions, namespaced_config, stack_specs
-from .supervisor import EXIT_USAGE, Monitor, Output, run_processes
+from .supervisor import EXIT_FAILED, EXIT_USAGE, Monitor, Output, run_processes
 
 
 def launch(options: LaunchOptions, stream: IO[str] | None = None, *,
@@ -26,6 +26,9 @@ def launch(options: LaunchOptions, stream: IO[str] | None = None, *,
         if options.real_time_factor <= 0:
             raise LaunchError('--real-time-factor must be > 0')
         specs, config, duration = stack_specs(options)
+    except UnreadableFileError as exc:     # a shipped parameter file, edited
+        print(f'tiltrov launch: {exc}', file=sys.stderr)
+        return EXIT_FAILED
     except (TiltrovError, FileNotFoundError) as exc:
         print(f'tiltrov launch: {exc}', file=sys.stderr)
         return EXIT_USAGE
