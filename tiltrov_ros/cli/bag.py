@@ -48,6 +48,13 @@ def _info(path: str) -> int:
         print(f'  {name:<{width}}  {topic.count:>8}  {topic.msgtype}')
     if info.run_info:
         print(f'run_info:  {json.dumps(info.run_info, sort_keys=True)}')
+    from tiltrov_ros.bag.losses import losses
+
+    found = losses(path)
+    print('lost:      ' + ('nothing (the nodes\' counts and the recorder agree)' if not found
+                           else f'{len(found.lines())} finding(s)'))
+    for line in found.lines():
+        print(f'  {line}')
     return 0
 
 

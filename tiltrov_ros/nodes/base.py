@@ -16,6 +16,7 @@ from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
 from rclpy.context import Context
+from rclpy.duration import Duration
 from rclpy.exceptions import (
     InvalidParameterTypeException,
     InvalidParameterValueException,
@@ -44,6 +45,9 @@ DIAGNOSTICS_PERIOD = 1.0
 #: how long it waits at most before it publishes anyway (``wait_for_recorder``).
 RECORDER_POLL = 0.02
 RECORDER_WAIT = 10.0
+#: s (wall): how long a node that stops waits at most for its readers to acknowledge
+#: its last messages (below the launcher's SIGINT timeout).
+DELIVERY_WAIT = 3.0
 #: DiagnosticStatus levels as ints (the message field is a byte).
 OK, WARN, ERROR = 0, 1, 2
 
@@ -423,6 +427,22 @@ class TiltrovNode(Node):
         self.get_logger().error(f'withheld a {topic} message with a non-finite value '
                                 f'({self.unsafe[topic]} so far); publishing the safe command',
                                 throttle_duration_sec=THROTTLE)
+
+    def wait_for_delivery(self, timeout: float = DELIVERY_WAIT) -> bool:
+        """Wait (at most ``timeout`` wall seconds in all) until every reliable reader has
+        acknowledged every message this node published (its guarded publishers and
+        /diagnostics). Called before the node's writers are destroyed: a writer's
+        unacknowledged samples go with it, so a reader that lags (the bag recorder on
+        a loaded machine) would lose the last ones."""
+        deadline = time.monotonic() + timeout
+        acked = True
+        publishers = [p.publisher for p in self._safe_publishers]
+        if self._diagnostics_pub is not None:
+            publishers.append(self._diagnostics_pub)
+        for pub in publishers:
+            left = max(deadline - time.monotonic(), 0.0)
+            acked = bool(pub.wait_for_all_acked(Duration(seconds=left))) and acked
+        return acked
 
     def published_counts(self) -> dict[str, int]:
         """Messages published per topic by the guarded publishers."""

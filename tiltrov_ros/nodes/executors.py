@@ -5,11 +5,17 @@ from __future__ import annotations
 from collections.abc import Callable
 import os
 import re
+import signal
 import sys
+import threading
 
 import rclpy
 from rclpy.context import Context
-from rclpy.exceptions import InvalidNamespaceException, InvalidNodeNameException, ParameterException
+from rclpy.exceptions import (
+    InvalidNamespaceException,
+    InvalidNodeNameException,
+    ParameterException,
+)
 from rclpy.executors import (
     Executor,
     ExternalShutdownException,
@@ -17,6 +23,7 @@ from rclpy.executors import (
     SingleThreadedExecutor,
 )
 import rclpy.logging
+from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 
 from tiltrov_ros.core.errors import ParameterError, TiltrovError
@@ -58,7 +65,7 @@ def rcl_error_line(exc: Exception) -> str:
     return f'cannot read parameter file {path}: {why}'
 
 
-def init(args: list[str] | None, name: str) -> bool:
+def init(args: list[str] | None, name: str, *, signal_handlers: bool = True) -> bool:
     """``rclpy.init(args)``; on arguments rcl refuses (an unreadable parameter file,
     a malformed ``-p``) print one line naming the node and the file and return False.
 
@@ -68,7 +75,8 @@ def init(args: list[str] | None, name: str) -> bool:
     previous = rclpy.logging.get_logger_level('rcl')
     rclpy.logging.set_logger_level('rcl', rclpy.logging.LoggingSeverity.FATAL)
     try:
-        rclpy.init(args=args)
+        rclpy.init(args=args, signal_handler_options=(
+            SignalHandlerOptions.ALL if signal_handlers else SignalHandlerOptions.NO))
     except (RuntimeError, ValueError) as exc:   # rclpy's RCLError is a RuntimeError
         print(f'{name}: {rcl_error_line(exc)}', file=sys.stderr, flush=True)
         return False
@@ -100,34 +108,50 @@ def make_executor(context: Context | None = None, kind: str | None = None) -> Ex
 
 
 def spin_until(executor: Executor, context: Context, future: Future | None = None,
-               step: float = 0.5) -> None:
-    """Spin until ``future`` is done (None: for ever) or the context shuts down (Ctrl-C).
+               step: float = 0.5, stop: threading.Event | None = None) -> None:
+    """Spin until ``future`` is done (None: for ever), ``stop`` is set or the context
+    shuts down (Ctrl-C).
 
     The wait is handed to the executor in slices of ``step`` seconds
     (``spin_until_future_complete``), never event by event from Python: the
     EventsExecutor then runs its loop in C++ (a ``None`` timeout does not
     return there when the future completes, hence the slices).
     """
-    while context.ok() and (future is None or not future.done()):
+    while (context.ok() and (future is None or not future.done())
+           and (stop is None or not stop.is_set())):
         if future is None:
             executor.spin_once(timeout_sec=step)
         else:
             executor.spin_until_future_complete(future, timeout_sec=step)
 
 
+#: s (wall): the longest a stop signal waits for the spin to notice it.
+STOP_POLL = 0.2
+
+
 def main_loop(factory: Callable[[], TiltrovNode], args: list[str] | None, name: str, *,
-              until: Callable[[TiltrovNode], Future | None] | None = None,
-              before_exit: Callable[[TiltrovNode], None] | None = None) -> int:
-    """The Jazzy ``main``: init, spin, and always destroy the node and shut down.
+              until: Callable[[TiltrovNode], Future | None] | None = None) -> int:
+    """The ``main`` of every stack node: init, spin, end in order, always clean up.
 
     ``until`` returns a future that ends the spin when done (the plant's end of
-    run); ``before_exit`` runs after a normal end (flush deliveries). A start-up
-    error (an invalid parameter, a wrong-type YAML value) is printed as one line
-    naming the node and gives exit code 1; Ctrl-C (the context shut down by
-    rclpy's signal handler) gives 0.
+    run). The run also ends on SIGINT or SIGTERM (Ctrl-C, the launcher). Either
+    way the node then publishes its final /diagnostics (its message counts) and
+    waits until its readers acknowledged everything it published
+    (:meth:`~tiltrov_ros.nodes.base.TiltrovNode.wait_for_delivery`) before its
+    writers go: a lagging reader (the recorder) loses nothing. Exit code 0.
+
+    A start-up error (an unreadable parameter file, an invalid parameter, a
+    wrong-type YAML value) is printed as one line naming the node and gives exit
+    code 1.
     """
-    if not init(args, name):
+    if not init(args, name, signal_handlers=False):
         return 1
+    stop = threading.Event()
+
+    def on_signal(signum: int, frame: object) -> None:
+        stop.set()
+
+    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     context = rclpy.get_default_context()
     node: TiltrovNode | None = None
     executor: Executor | None = None
@@ -137,11 +161,12 @@ def main_loop(factory: Callable[[], TiltrovNode], args: list[str] | None, name: 
         executor = make_executor(context)
         executor.add_node(node)
         future = until(node) if until is not None else None
-        # Not executor.spin(): the EventsExecutor's does not return when Ctrl-C shuts
-        # the context down; spin_until checks the context between slices.
-        spin_until(executor, context, future if future is not None else Future())
-        if future is not None and future.done() and before_exit is not None:
-            before_exit(node)
+        # Not executor.spin(): the EventsExecutor's does not return on a stop;
+        # spin_until checks the flag between slices.
+        spin_until(executor, context, future if future is not None else Future(),
+                   step=STOP_POLL, stop=stop)
+        node.publish_diagnostics()     # the final counts, for the recorder
+        node.wait_for_delivery()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except STARTUP_ERRORS as exc:
@@ -159,4 +184,6 @@ def main_loop(factory: Callable[[], TiltrovNode], args: list[str] | None, name: 
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
     return code

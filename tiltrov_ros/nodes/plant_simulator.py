@@ -41,7 +41,6 @@ from typing import Any
 
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.duration import Duration
 from rclpy.parameter import Parameter
 from rclpy.task import Future
 from rosgraph_msgs.msg import Clock as ClockMsg
@@ -459,17 +458,6 @@ class PlantSimulator(TiltrovNode):
             'failed_thrusters': [i + 1 for i in plant.failed_thrusters],
         }
 
-    def wait_for_delivery(self, timeout: float = 0.5) -> bool:
-        """Wait (at most ``timeout`` s in all) until every reliable reader acknowledged
-        the last messages (end of run). Fast DDS acknowledges on its heartbeat period,
-        so this is a bounded courtesy: the samples are already on the wire."""
-        deadline = self.steady_ns() + to_ns(timeout)
-        acked = True
-        for pub in (self._joint_pub, self._odom_pub, self._clock_pub):
-            left = max(deadline - self.steady_ns(), 0)
-            acked = pub.wait_for_all_acked(Duration(nanoseconds=left)) and acked
-        return acked
-
 
 def main(args: list[str] | None = None) -> int:
     """``plant_simulator [--ros-args --params-file config/plant_simulator.yaml ...]``."""
@@ -477,11 +465,7 @@ def main(args: list[str] | None = None) -> int:
     def until(node: Any) -> Future | None:
         return node.finished if node.config.exit_at_end else None
 
-    def before_exit(node: Any) -> None:
-        node.publish_diagnostics()      # the final counts, for recorders and tiltrov soak
-        node.wait_for_delivery()
-
-    return main_loop(PlantSimulator, args, PLANT, until=until, before_exit=before_exit)
+    return main_loop(PlantSimulator, args, PLANT, until=until)
 
 
 if __name__ == '__main__':

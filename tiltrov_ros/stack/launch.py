@@ -8,12 +8,13 @@ import sys
 import tempfile
 from typing import IO
 
+from tiltrov_ros.bag.losses import losses
 from tiltrov_ros.core.errors import TiltrovError, UnreadableFileError
 from tiltrov_ros.core.names import normalize_namespace
 
 from .inprocess import run_single_process
 from .specs import LaunchError, LaunchOptions, namespaced_config, stack_specs
-from .supervisor import EXIT_FAILED, EXIT_USAGE, Monitor, Output, run_processes
+from .supervisor import EXIT_FAILED, EXIT_OK, EXIT_USAGE, Monitor, Output, run_processes
 
 
 def launch(options: LaunchOptions, stream: IO[str] | None = None, *,
@@ -42,9 +43,30 @@ def launch(options: LaunchOptions, stream: IO[str] | None = None, *,
             namespaced_config(specs, namespace, Path(tmp))
             specs, _, _ = stack_specs(options, config_dir=Path(tmp))
         if options.single_process:
-            return run_single_process(specs, namespace, out, summary, options.executor,
+            code = run_single_process(specs, namespace, out, summary, options.executor,
                                       status_file=options.status_file)
-        env = {'TILTROV_EXECUTOR': options.executor} if options.executor else {}
-        return run_processes(specs, namespace, out, summary, Path(tmp), env,
-                             respawn=options.respawn, monitor=monitor, linger=linger,
-                             status_file=options.status_file)
+        else:
+            env = {'TILTROV_EXECUTOR': options.executor} if options.executor else {}
+            code = run_processes(specs, namespace, out, summary, Path(tmp), env,
+                                 respawn=options.respawn, monitor=monitor, linger=linger,
+                                 status_file=options.status_file)
+    if code == EXIT_OK and options.record is not None:
+        code = check_recording(options.record)
+    return code
+
+
+def check_recording(bag: Path) -> int:
+    """EXIT_OK when the bag has every message the nodes say they published and the
+    recorder lost nothing (bag/losses.py), else one line per loss and EXIT_FAILED."""
+    try:
+        found = losses(bag)
+    except TiltrovError as exc:
+        print(f'tiltrov launch: failed: the bag {bag} cannot be read: {exc}', file=sys.stderr)
+        return EXIT_FAILED
+    if not found:
+        return EXIT_OK
+    print(f'tiltrov launch: failed: the recording lost data (tiltrov bag info {bag}):',
+          file=sys.stderr)
+    for line in found.lines():
+        print(f'  {line}', file=sys.stderr)
+    return EXIT_FAILED

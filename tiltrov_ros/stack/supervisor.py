@@ -281,11 +281,9 @@ def run_processes(specs: Sequence[NodeSpec], namespace: str, out: Output,
             supervisor.report('starting')
         supervisor.report('running')
         code = supervisor.watch(summary, started, linger)
-        return code
     except _Stop as stop:
         out.line('launch', f'{stop.args[0]}: stopping every node')
         code = EXIT_INTERRUPTED
-        return code
     finally:
         stopping.set()              # from here on a signal only hurries the stop
         supervisor.report('stopping')
@@ -298,7 +296,13 @@ def run_processes(specs: Sequence[NodeSpec], namespace: str, out: Output,
             dead = [c.spec.name for c in supervisor.children
                     if c.process.returncode not in (0, None, -signal.SIGINT)]
             print(f'tiltrov launch: failed: {", ".join(dead) or "a node"} died', file=sys.stderr)
+        recorder = next((c for c in supervisor.children if c.spec.name == RECORDER), None)
+        if code == EXIT_OK and recorder is not None and recorder.process.returncode != 0:
+            print(f'tiltrov launch: failed: the recording lost data (bag_recorder exit code '
+                  f'{recorder.process.returncode})', file=sys.stderr)
+            code = EXIT_FAILED
         supervisor.report('ended', code)
+    return code
 
 
 def _pids(children: Sequence[_Child]) -> dict[str, int]:
