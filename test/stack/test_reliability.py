@@ -314,3 +314,90 @@ def test_tiltrov_launch_names_an_unreadable_input_in_one_line(
     lines = result.stderr.splitlines()
     assert len(lines) == 1 and lines[0].startswith(
         f'tiltrov launch: {message.format(**files)}'), result.stderr
+
+
+# --------------------------------------------------------------------------- data loss
+
+
+@pytest.fixture
+def small_disk(tmp_path: Path) -> Any:
+    """A 2 MiB tmpfs (the recording outgrows it); skipped where mounting is not allowed."""
+    mount = tmp_path / 'small_disk'
+    mount.mkdir()
+    result = subprocess.run(['mount', '-t', 'tmpfs', '-o', 'size=2m', 'tmpfs', str(mount)],
+                            capture_output=True, text=True)
+    if result.returncode != 0:
+        pytest.skip(f'cannot mount a tmpfs here: {result.stderr.strip()}')
+    try:
+        yield mount
+    finally:
+        subprocess.run(['umount', '-l', str(mount)], check=False)
+
+
+@pytest.mark.slow
+def test_recording_into_a_full_disk_fails_the_launch_and_says_what_was_lost(
+        tmp_path: Path, small_disk: Path) -> None:
+    """``tiltrov launch --record`` into a 2 MiB disk: the stack runs to the end, the
+    launch exits 1 saying the recording lost data (before: exit code 0)."""
+    bag = small_disk / 'bag'
+    result = subprocess.run(
+        [sys.executable, '-m', 'tiltrov_ros.cli', 'launch', '--duration', '30',
+         '--record', str(bag)], capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert result.returncode == 1, result.stdout + result.stderr
+    assert 'reached the end of the run at 30.000 s' in result.stdout
+    assert 'bag_recorder: data lost in' in result.stdout
+    assert 'No space left on device' in result.stdout
+    assert 'tiltrov launch: failed: the recording lost data' in result.stderr
+    assert 'Traceback' not in result.stdout + result.stderr
+
+
+# --------------------------------------------------------------------------- smaller ones
+
+
+def test_bag_repair_of_a_garbage_metadata_file_is_one_line(tmp_path: Path) -> None:
+    bag = tmp_path / 'bag'
+    result = subprocess.run([sys.executable, '-m', 'tiltrov_ros.cli', 'launch', '--duration',
+                             '0.5', '--record', str(bag)], capture_output=True, text=True,
+                            timeout=120, cwd=tmp_path)
+    assert result.returncode == 0, result.stdout + result.stderr
+    (bag / 'metadata.yaml').write_bytes(bytes(range(256)) * 8)
+    repaired = subprocess.run([sys.executable, '-m', 'tiltrov_ros.cli', 'bag', 'repair',
+                               str(bag)], capture_output=True, text=True, timeout=60)
+    assert repaired.returncode == 0, repaired.stdout + repaired.stderr
+    assert 'Traceback' not in repaired.stdout + repaired.stderr
+    assert 'recovered' in repaired.stdout
+
+
+@pytest.mark.slow
+def test_a_huge_frame_id_is_cut_in_the_log_and_a_second_plant_is_named(ros: Any) -> None:
+    """Odometry with a 1 MB frame_id: the controller's log grows by a few kB, not
+    megabytes. Two nodes publishing odom (a second simulator): the controller's
+    /diagnostics names both."""
+    process = _node_process(CONTROLLER)
+    try:
+        probe = Probe(ros.node('diagnostics_probe'), ['/diagnostics'])
+        pubs = [ros.node(name).create_publisher(Odometry, 'odom', KEEP_ALL)
+                for name in ('first_plant', 'second_plant')]
+        assert ros.spin_until(lambda: all(p.get_subscription_count() > 0 for p in pubs)
+                              and bool(diagnostics(probe, CONTROLLER)), timeout=30.0)
+        sent = 0
+
+        def named() -> bool:
+            nonlocal sent
+            values = diagnostics(probe, CONTROLLER)
+            if sent < 10 and not values.get('rejected.odom.wrong_frame'):
+                msg = odometry(sent * TICK, [0.0] * 3, [1.0, 0.0, 0.0, 0.0], [0.0] * 6)
+                msg.header.frame_id = 'x' * 1_000_000
+                pubs[1].publish(msg)    # best effort (realtime odometry): may be lost
+                sent += 1
+            return (int(values.get('rejected.odom.wrong_frame', '0')) >= 1
+                    and '/first_plant' in values.get('publishers./odom', '')
+                    and '/second_plant' in values.get('publishers./odom', ''))
+
+        assert ros.spin_until(named, timeout=30.0), diagnostics(probe, CONTROLLER)
+        assert '2 publishers of /odom' in diagnostics(probe, CONTROLLER)['_message']
+    finally:
+        out = _ended(process)
+    assert 'Traceback' not in out
+    assert len(out) < 10_000, len(out)
+    assert '(1000000 characters)' in out

@@ -111,9 +111,21 @@ def is_stale(stamp: int, now_ns: int | None, timeout_ns: int) -> bool:
     return now_ns is not None and timeout_ns > 0 and now_ns - stamp > timeout_ns
 
 
+#: Characters of a string from a message shown in a log line or an error.
+MAX_SHOWN = 64
+
+
+def shown(text: str, limit: int = MAX_SHOWN) -> str:
+    """``repr(text)``, cut to ``limit`` characters with the length said: strings from
+    messages reach the logs only through this (a 1 MB frame_id must not)."""
+    if len(text) <= limit:
+        return repr(text)
+    return f'{text[:limit]!r}... ({len(text)} characters)'
+
+
 def check_frame(frame_id: str, expected: str, field: str = 'frame_id') -> None:
     if frame_id != expected:
-        raise InvalidInput(WRONG_FRAME, f'{field} {frame_id!r}; expected {expected!r}')
+        raise InvalidInput(WRONG_FRAME, f'{field} {shown(frame_id)}; expected {expected!r}')
 
 
 def check_finite(values: Iterable[float], what: str) -> None:
@@ -145,10 +157,10 @@ def joint_values(names: Sequence[str], arrays: dict[str, Sequence[float]],
     seen: set[str] = set()
     for name in names:
         if name in seen:
-            raise InvalidInput(DUPLICATE_JOINT, f'joint {name!r} appears twice')
+            raise InvalidInput(DUPLICATE_JOINT, f'joint {shown(name)} appears twice')
         seen.add(name)
         if name not in permitted:
-            raise InvalidInput(UNKNOWN_JOINT, f'unknown joint {name!r}; allowed: '
+            raise InvalidInput(UNKNOWN_JOINT, f'unknown joint {shown(name)}; allowed: '
                                               f'{", ".join(sorted(permitted))}')
     missing = [name for name in required if name not in seen]
     if missing:

@@ -27,7 +27,7 @@ from rclpy.qos import QoSProfile
 
 from tiltrov_ros.core import validation
 from tiltrov_ros.core.errors import ParameterError
-from tiltrov_ros.core.names import DIAGNOSTICS
+from tiltrov_ros.core.names import CLOCK, DIAGNOSTICS
 from tiltrov_ros.core.paramtable import Param, ParamTable
 from tiltrov_ros.core.timebase import NS_PER_S
 from tiltrov_ros.core.validation import InvalidInput, StampBounds
@@ -48,6 +48,9 @@ RECORDER_WAIT = 10.0
 #: s (wall): how long a node that stops waits at most for its readers to acknowledge
 #: its last messages (below the launcher's SIGINT timeout).
 DELIVERY_WAIT = 3.0
+#: Characters of a rejection's detail in a log line (the strings of a message inside it
+#: are already cut by core/validation.shown): a log line stays bounded.
+MAX_DETAIL = 300
 #: DiagnosticStatus levels as ints (the message field is a byte).
 OK, WARN, ERROR = 0, 1, 2
 
@@ -222,8 +225,13 @@ class TiltrovNode(Node):
         self._reject_log: dict[tuple[str, str], tuple[int, int]] = {}
         self._rejected_at_last_report = 0
         self._safe_publishers: list[SafePublisher] = []
+        #: Topics that must have one source (the plant's); more are named on /diagnostics.
+        self.single_source: list[str] = []
+        self._sources_reported: dict[str, tuple[str, ...]] = {}
         #: rclpy's time source with each /clock sample checked (nodes/simclock.py).
         self.time_source = install_time_source(self)
+        if self.stack_node and self.on_sim_time():
+            self.expect_single_source(CLOCK)
         self.add_on_set_parameters_callback(self._refuse_fixed)
         # Lockstep with a recorder (the launcher sets it with --record): hold this
         # node's outputs, in order, until the recorder reads every one of its topics.
@@ -360,8 +368,10 @@ class TiltrovNode(Node):
         last, quiet = self._reject_log.get(key, (None, 0))
         if last is None or now - last >= THROTTLE * NS_PER_S:
             more = f' ({quiet} more since the last report)' if quiet else ''
+            detail = bad.detail if len(bad.detail) <= MAX_DETAIL else (
+                f'{bad.detail[:MAX_DETAIL]}... (cut)')
             self.get_logger().warning(f'rejected a {topic} message ({bad.reason}): '
-                                      f'{bad.detail}{more}')
+                                      f'{detail}{more}')
             self._reject_log[key] = (now, 0)
         else:
             self._reject_log[key] = (last, quiet + 1)
@@ -457,9 +467,34 @@ class TiltrovNode(Node):
     def steady_ns(self) -> int:
         return int(self.steady.now().nanoseconds)
 
+    def expect_single_source(self, *topics: str) -> None:
+        """``topics`` must have one publisher (the plant's odom, joint_states, /clock):
+        a second one (another simulator, a replay) is named on /diagnostics (WARN)
+        and logged once when it appears."""
+        self.single_source.extend(self.resolve_topic_name(t) for t in topics)
+
+    def extra_sources(self) -> dict[str, tuple[str, ...]]:
+        """Topic -> its publishers (node names), for the single-source topics with more
+        than one."""
+        found: dict[str, tuple[str, ...]] = {}
+        for topic in self.single_source:
+            names = tuple(sorted({f'{i.node_namespace.rstrip("/")}/{i.node_name}'
+                                  for i in self.get_publishers_info_by_topic(topic)}))
+            if len(names) > 1:
+                found[topic] = names
+            if names != self._sources_reported.get(topic, names[:1]) and len(names) > 1:
+                self.get_logger().warning(f'{len(names)} publishers of {topic}: '
+                                          f'{", ".join(names)}; one is expected')
+            self._sources_reported[topic] = names
+        return found
+
     @guarded
     def publish_diagnostics(self) -> None:
         level, message, values = self.diagnostic_status()
+        for topic, names in self.extra_sources().items():
+            level = max(level, WARN)
+            message = f'{message}; {len(names)} publishers of {topic}: {", ".join(names)}'
+            values = {**values, f'publishers.{topic}': list(names)}
         rejected = self.rejected_messages
         if rejected > self._rejected_at_last_report:
             level = max(level, WARN)

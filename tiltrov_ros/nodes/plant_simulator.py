@@ -113,6 +113,7 @@ class PlantSimulator(TiltrovNode):
         self._odom_pub = self.create_safe_publisher(Odometry, ODOM, PUBLISHER_QOS)
         self._joint_pub = self.create_safe_publisher(JointState, JOINT_STATES, PUBLISHER_QOS)
         self._clock_pub = self.create_safe_publisher(ClockMsg, CLOCK, PUBLISHER_QOS)
+        self.expect_single_source(ODOM, JOINT_STATES, CLOCK)
         self._odom_msg = new_odometry()
         self._joint_msg = new_joint_state(TILTS + THRUSTERS)
         self._clock_msg = ClockMsg()

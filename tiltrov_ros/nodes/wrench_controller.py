@@ -159,6 +159,7 @@ class WrenchController(TiltrovNode):
         # deserialized; the stamp of the others is read from the CDR header.
         self.create_subscription(Odometry, ODOM, self._on_odom_raw, reader_qos(self.mode),
                                  raw=True)
+        self.expect_single_source(ODOM)
         self.create_subscription(PoseStamped, SETPOINT, self._on_setpoint, RELIABLE_QOS)
         if self.use_velocity:
             self.create_subscription(TwistStamped, SETPOINT_VELOCITY, self._on_velocity,
