@@ -112,8 +112,9 @@ ALLOCATION = ParamTable('allocation', [
 #: bounds and the robot).
 ALLOCATOR_PARAMS = ParamTable('thrust_allocator', [
     Param('tilt_request', 'str', 'auto', 'tilts fixed by the controller (switching baseline): '
-          'required, ignored, or auto (required once a tilt_request publisher or message is '
-          'seen)', choices=TILT_REQUEST_MODES, read_only=True),
+          'required, ignored, or auto (paired once a request carries a wrench_cmd stamp, free '
+          'again after a wrench waited input_timeout in vain)', choices=TILT_REQUEST_MODES,
+          read_only=True),
     Param('input_timeout', 'float', 1.0, 'wall seconds a wrench waits for its tilt_request '
           'before the latest one is used', 's', low=0.001, high=3600.0),
     Param('wrench_timeout', 'float', 0.5, 'zero thrust (tilts held) is published every '
