@@ -12,9 +12,10 @@ import sys
 import time
 from typing import Any
 
-from geometry_msgs.msg import WrenchStamped
+from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
 from nav_msgs.msg import Odometry
 import pytest
+from rclpy.serialization import serialize_message
 from ros_stack import (
     KEEP_ALL,
     LaunchProcess,
@@ -30,7 +31,7 @@ from sensor_msgs.msg import JointState
 
 from tiltrov_ros.core.names import ALLOCATOR, CONTROLLER, PLANT, REFERENCE
 from tiltrov_ros.core.timebase import NS_PER_S
-from tiltrov_ros.nodes.conversions import stamp_ns
+from tiltrov_ros.nodes.conversions import set_stamp, stamp_ns
 from tiltrov_ros.paths import config_file
 
 STACK = (ALLOCATOR, CONTROLLER, REFERENCE, PLANT)
@@ -181,6 +182,73 @@ def test_rejected_odometry_stamped_back_resets_nothing(ros: Any, tmp_path: Path)
         assert 'resetting' not in launch.output and 'forgetting' not in launch.output
     finally:
         launch.cleanup()
+
+
+#: The topics each node reads (the switching controller's stack: the allocator reads
+#: tilt_request too), and the type a sample of each must decode as.
+READERS = {
+    CONTROLLER: ('odom', 'setpoint', 'setpoint_velocity', '/clock'),
+    ALLOCATOR: ('wrench_cmd', 'tilt_request', '/clock'),
+    REFERENCE: ('/clock',),
+    PLANT: ('thrust_cmd', 'tilt_cmd'),
+}
+TYPES = {'odom': Odometry, 'setpoint': PoseStamped, 'setpoint_velocity': TwistStamped,
+         '/clock': Clock, 'wrench_cmd': WrenchStamped, 'tilt_request': JointState,
+         'thrust_cmd': JointState, 'tilt_cmd': JointState}
+
+
+@pytest.mark.slow
+def test_truncated_cdr_on_every_topic_a_node_reads_is_rejected_and_counted(
+        ros: Any, tmp_path: Path) -> None:
+    """Samples cut short (a faulty bridge, a tool writing raw bytes) on every topic the
+    nodes read: each node rejects and counts them (``rejected.<topic>.malformed``),
+    logs them, and runs on (before: rclpy's typed subscriptions dropped them without
+    a count or a log line)."""
+    launch = LaunchProcess(tmp_path, '--realtime', '--duration', '600', '--controller',
+                           'switching')
+    try:
+        launch.wait_running()
+        probe = ready(ros, STACK, until=_stepping)
+        watch = Probe(ros.node('clock_probe'), ['/clock'])
+        attacker = ros.node('cdr_attacker')
+        pubs = {topic: attacker.create_publisher(msg_type, topic, KEEP_ALL)
+                for topic, msg_type in TYPES.items()}
+        assert ros.spin_until(lambda: len(watch['/clock']) > 0 and all(
+            p.get_subscription_count() > 0 for p in pubs.values()), timeout=30.0)
+
+        def cut(topic: str) -> bytes:
+            """A valid sample of ``topic`` stamped at the latest control tick, cut in
+            half (odom: also one too short to hold a stamp)."""
+            tick = _latest_clock(watch) // TICK * TICK
+            msg = TYPES[topic]()
+            set_stamp(msg.clock if topic == '/clock' else msg.header.stamp, tick)
+            data = serialize_message(msg)
+            return data[:len(data) // 2]
+
+        def every_reader_counted() -> bool:
+            # Some readers keep only the latest samples, best effort (realtime odometry,
+            # rclpy's /clock reader): a sample may be overwritten; send until counted.
+            done = True
+            for node, topics in READERS.items():
+                for topic in topics:
+                    if _count(probe, node, f'rejected.{topic}.malformed') == 0:
+                        pubs[topic].publish(cut(topic))
+                        if topic == 'odom':
+                            pubs[topic].publish(b'\x00\x01\x00\x00\x01\x02')
+                        done = False
+            return done
+
+        assert ros.spin_until(every_reader_counted, timeout=60.0), {
+            n: diagnostics(probe, n) for n in STACK}
+        assert ros.spin_until(lambda: _stepping(probe) and all(
+            _count(probe, n, 'callback_errors') == 0 for n in STACK))
+        assert launch.process.poll() is None, launch.output
+        assert ros.spin_until(lambda: 'malformed' in launch.output, timeout=10.0)
+        assert 'bytes that do not decode as geometry_msgs/msg/WrenchStamped' in launch.output
+        assert _stop(launch) == 130, launch.output
+    finally:
+        launch.cleanup()
+    assert 'died' not in launch.output and 'Traceback' not in launch.output, launch.output
 
 
 # --------------------------------------------------------------------------- tilt_request

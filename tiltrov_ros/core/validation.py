@@ -34,10 +34,11 @@ BAD_QUATERNION = 'bad_quaternion'  # norm not within QUATERNION_TOLERANCE of 1
 BAD_STAMP = 'bad_stamp'            # negative time or nanosec >= 1e9
 FUTURE_STAMP = 'future_stamp'      # more than max_future ahead of the node's clock
 OLD_STAMP = 'old_stamp'            # more than max_age behind the node's clock
+MALFORMED = 'malformed'            # bytes that do not decode as the topic's type (cut CDR)
 
 #: Every rejection reason, as counted on /diagnostics.
 REASONS = (NON_FINITE, WRONG_LENGTH, UNKNOWN_JOINT, MISSING_JOINT, DUPLICATE_JOINT,
-           WRONG_FRAME, BAD_QUATERNION, BAD_STAMP, FUTURE_STAMP, OLD_STAMP)
+           WRONG_FRAME, BAD_QUATERNION, BAD_STAMP, FUTURE_STAMP, OLD_STAMP, MALFORMED)
 #: Reasons that concern the stamp itself: a node never answers with such a stamp.
 STAMP_REASONS = (BAD_STAMP, FUTURE_STAMP, OLD_STAMP)
 

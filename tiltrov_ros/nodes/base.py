@@ -24,13 +24,15 @@ from rclpy.exceptions import (
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
+from rclpy.serialization import deserialize_message
+from rclpy.subscription import Subscription
 
 from tiltrov_ros.core import validation
 from tiltrov_ros.core.errors import ParameterError
 from tiltrov_ros.core.names import CLOCK, DIAGNOSTICS
 from tiltrov_ros.core.paramtable import Param, ParamTable
 from tiltrov_ros.core.timebase import NS_PER_S
-from tiltrov_ros.core.validation import InvalidInput, StampBounds
+from tiltrov_ros.core.validation import MALFORMED, InvalidInput, StampBounds
 
 from .conversions import message_is_finite
 from .parameters import Overrides, allowed_text, as_parameters, declare, parameter_source
@@ -357,6 +359,40 @@ class TiltrovNode(Node):
         if frame is not None:
             validation.check_frame(header.frame_id, frame)
         return ns
+
+    def create_input_subscription(self, msg_type: Any, topic: str,
+                                  callback: Callable[[Any], Any], qos: QoSProfile
+                                  ) -> Subscription:
+        """A subscription of ``topic`` that decodes what it receives itself (a raw
+        subscription and :meth:`decode`): bytes that do not decode as ``msg_type``
+        are rejected as ``malformed`` (rclpy's typed subscriptions drop them without
+        a trace); a message that decodes goes to ``callback``, an
+        :func:`input_callback`."""
+
+        def on_bytes(data: bytes) -> None:
+            msg = self.decode(msg_type, topic, data)
+            if msg is not None:
+                callback(msg)
+
+        return self.create_subscription(msg_type, topic, on_bytes, qos, raw=True)
+
+    def decode(self, msg_type: Any, topic: str, data: bytes) -> Any | None:
+        """``data`` (serialized CDR) as a ``msg_type`` message, or None when it does not
+        decode (truncated, garbage): then rejected as ``malformed`` (counted, logged)."""
+        try:
+            return deserialize_message(data, msg_type)
+        except Exception:   # rclpy raises RMWError (Fast CDR: not enough bytes, ...)
+            self.reject_malformed(topic, msg_type, data)
+            return None
+
+    def reject_malformed(self, topic: str, msg_type: Any, data: bytes) -> None:
+        """Reject ``data`` received on ``topic``: not a serialized ``msg_type``."""
+        try:
+            name = f'{msg_type.__module__.split(".")[0]}/msg/{msg_type.__name__}'
+            self.reject_input(topic, InvalidInput(
+                MALFORMED, f'{len(data)} bytes that do not decode as {name}'))
+        except Exception as exc:  # the executor must survive anything a sample holds
+            _callback_failed(self, 'reject_malformed', exc)
 
     def reject_input(self, topic: str, bad: InvalidInput, stamp: int | None = None) -> None:
         """Count a rejected message of ``topic``, log it (at most once per THROTTLE

@@ -117,8 +117,9 @@ class PlantSimulator(TiltrovNode):
         self._odom_msg = new_odometry()
         self._joint_msg = new_joint_state(TILTS + THRUSTERS)
         self._clock_msg = ClockMsg()
-        self.create_subscription(JointState, THRUST_CMD, self._on_thrust_cmd, RELIABLE_QOS)
-        self.create_subscription(JointState, TILT_CMD, self._on_tilt_cmd, RELIABLE_QOS)
+        self.create_input_subscription(JointState, THRUST_CMD, self._on_thrust_cmd,
+                                       RELIABLE_QOS)
+        self.create_input_subscription(JointState, TILT_CMD, self._on_tilt_cmd, RELIABLE_QOS)
 
         # lockstep: tick ns -> [thrusts, tilts] (None: not yet; _REJECTED: bad message)
         self._pending: dict[int, list[list[float] | None]] = {}

@@ -103,7 +103,7 @@ class ReferencePublisher(TiltrovNode):
         self.skipped = 0
         self.restarts = 0
         if self.sim_time:
-            self.create_subscription(ClockMsg, CLOCK, self._on_clock, CLOCK_READER_QOS)
+            self.create_input_subscription(ClockMsg, CLOCK, self._on_clock, CLOCK_READER_QOS)
         else:
             self._start_ns = self.get_clock().now().nanoseconds
             self.create_timer(seconds(self.period_ns), self._on_timer)

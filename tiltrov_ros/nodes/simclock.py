@@ -8,7 +8,9 @@ nodes check every input (``core/validation.py``):
 
 * a malformed sample (``sec < 0`` or ``nanosec >= 1e9``) is rejected: counted
   on ``/diagnostics`` (``rejected./clock.bad_stamp``), logged (throttled), and
-  the node's clock stays where it was;
+  the node's clock stays where it was; so are bytes that do not decode as a
+  ``rosgraph_msgs/Clock`` (``rejected./clock.malformed``: the subscription is
+  raw and the node decodes it, rclpy's typed one would drop them unseen);
 * a sample earlier than the previous one is accepted: time starts over (a
   restarted simulator, a looped replay; rclpy and rclcpp do the same). It is
   counted (``clock_jumps_back``) and logged, and the nodes' own "stamp went
@@ -24,7 +26,10 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
 from rclpy.time_source import TimeSource
+from rosgraph_msgs.msg import Clock as ClockMsg
 
 from tiltrov_ros.core.names import CLOCK
 from tiltrov_ros.core.timebase import format_ns
@@ -45,6 +50,26 @@ class CheckedTimeSource(TimeSource):
         self.last_ns: int | None = None
         self.jumps_back = 0
         super().__init__(node=node)
+
+    def _subscribe_to_clock_topic(self) -> None:
+        """rclpy's subscription (same topic and QoS: the latest sample, best effort), but
+        raw: the node decodes each sample (:meth:`TiltrovNode.decode`), so bytes that
+        do not decode are rejected and counted instead of dropped unseen."""
+        node = self._get_node()
+        if self._clock_sub is None and node is not None:
+            self._clock_sub = node.create_subscription(
+                ClockMsg, CLOCK, self._on_clock_bytes,
+                QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT), raw=True)
+
+    def _on_clock_bytes(self, data: bytes) -> None:
+        node = self._owner
+        try:
+            msg = deserialize_message(data, ClockMsg)
+        except Exception:   # rclpy's RMWError: not a Clock
+            if not node.reads_clock:       # else the node's own /clock reader counts it
+                node.reject_malformed(CLOCK, ClockMsg, data)
+            return
+        self.clock_callback(msg)
 
     def clock_callback(self, msg: Any) -> None:
         node = self._owner

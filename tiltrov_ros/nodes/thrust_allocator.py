@@ -161,10 +161,10 @@ class ThrustAllocatorNode(TiltrovNode):
         self._thrust_pub = self.create_safe_publisher(
             JointState, THRUST_CMD, PUBLISHER_QOS,
             lambda msg: self._safe_msgs(stamp_ns(msg.header.stamp))[2])
-        self.create_subscription(WrenchStamped, WRENCH_CMD, self._on_wrench, RELIABLE_QOS)
+        self.create_input_subscription(WrenchStamped, WRENCH_CMD, self._on_wrench, RELIABLE_QOS)
         if self.tilt_request_mode != 'ignored':
-            self.create_subscription(JointState, TILT_REQUEST, self._on_tilt_request,
-                                     RELIABLE_QOS)
+            self.create_input_subscription(JointState, TILT_REQUEST, self._on_tilt_request,
+                                           RELIABLE_QOS)
             self.create_timer(WATCHDOG_PERIOD, self._watchdog, clock=self.steady)
 
         self.previous: AllocationResult | None = None

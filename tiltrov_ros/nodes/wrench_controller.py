@@ -35,7 +35,6 @@ from nav_msgs.msg import Odometry
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.parameter import Parameter
-from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 
 from tiltrov_ros.core.controllers import (
@@ -156,14 +155,15 @@ class WrenchController(TiltrovNode):
                                          position=self._safe_tilts))
             if self.kind == 'switching' else None)
         # Raw: only the odometry at control ticks (1 in control_period / step_size) is
-        # deserialized; the stamp of the others is read from the CDR header.
+        # deserialized (bytes that do not decode are rejected: malformed); the stamp of
+        # the others is read from the CDR header.
         self.create_subscription(Odometry, ODOM, self._on_odom_raw, reader_qos(self.mode),
                                  raw=True)
         self.expect_single_source(ODOM)
-        self.create_subscription(PoseStamped, SETPOINT, self._on_setpoint, RELIABLE_QOS)
+        self.create_input_subscription(PoseStamped, SETPOINT, self._on_setpoint, RELIABLE_QOS)
         if self.use_velocity:
-            self.create_subscription(TwistStamped, SETPOINT_VELOCITY, self._on_velocity,
-                                     RELIABLE_QOS)
+            self.create_input_subscription(TwistStamped, SETPOINT_VELOCITY, self._on_velocity,
+                                           RELIABLE_QOS)
 
         self._setpoints: dict[int, tuple[FloatArray, FloatArray]] = {}
         self._velocities: dict[int, FloatArray] = {}
@@ -254,8 +254,15 @@ class WrenchController(TiltrovNode):
 
     @guarded
     def _on_odom_raw(self, data: bytes) -> None:
-        if cdr_stamp_ns(data) % self.period_ns == 0:
-            self.on_odom(deserialize_message(data, Odometry))
+        try:
+            stamp = cdr_stamp_ns(data)
+        except ValueError:        # too short to hold a stamp
+            self.reject_malformed(ODOM, Odometry, data)
+            return
+        if stamp % self.period_ns == 0:
+            msg = self.decode(Odometry, ODOM, data)
+            if msg is not None:
+                self.on_odom(msg)
 
     @input_callback(ODOM)
     def on_odom(self, msg: Odometry) -> None:
