@@ -111,6 +111,30 @@ def test_record_gives_a_bag_equal_to_the_headless_run(tmp_path: Path,
 
 
 @pytest.mark.slow
+def test_a_late_first_answer_records_one_message_per_step_and_tick(tmp_path: Path) -> None:
+    """A recorded lockstep run whose controller waits for a recorder that is not there
+    (``wait_for_recorder`` naming another node): its first answer comes after that
+    wait's 10 s. The plant waits without publishing its initial state again, and the
+    bag has one message per step and per tick on every topic (before: the initial
+    state every 0.25 s, each recorded, and an answer to each)."""
+    from tiltrov_ros.bag.bagfile import bag_info
+
+    bag = tmp_path / 'bag'
+    result = subprocess.run(
+        _tiltrov('--duration', '2', '--record', str(bag),
+                 '--param', 'wrench_controller:wait_for_recorder:=another_recorder'),
+        capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert 'another_recorder does not read every topic of this node after 10 s' in result.stdout
+    counts = {name: topic.count for name, topic in bag_info(bag).topics.items()}
+    for topic in ('/odom', '/joint_states', '/clock'):
+        assert counts[topic] == 201, counts
+    for topic in ('/setpoint', '/setpoint_velocity', '/wrench_cmd', '/thrust_cmd',
+                  '/tilt_cmd', '/wrench_achieved'):
+        assert counts[topic] == 40, counts
+
+
+@pytest.mark.slow
 @pytest.mark.parametrize('victim', ['thrust_allocator', 'wrench_controller'])
 def test_a_killed_node_is_respawned_and_the_loop_resumes(ros: Any, tmp_path: Path,
                                                          victim: str) -> None:

@@ -15,12 +15,17 @@ Modes (parameter ``mode``):
   t_i, which it applies before stepping (zero-order hold until the next
   tick), exactly as :func:`tiltrov_ros.core.runner.run` does. Before the
   initial state it waits until ``startup_subscribers`` readers are matched on
-  ``odom`` and both command topics have a publisher, then ``startup_delay``
+  ``odom`` and a publisher on each command topic, then ``startup_delay``
   wall seconds more. If the commands of a tick
   have not come after ``stall_timeout`` wall seconds, the wait is reported on
   ``/diagnostics`` as a stall and the state at t_i (joint_states, odom, clock)
   is published again, so a lost message or a restarted controller resumes the
-  run; every node of the stack answers a repeated stamp idempotently.
+  run; every node of the stack answers a repeated stamp idempotently. The
+  initial state is published again only for a reader matched after it went
+  out (a late reader cannot have it): the first answer may be slow (a node
+  holds its outputs until the bag recorder reads them, up to
+  ``RECORDER_WAIT``), and a state published twice is recorded twice. Only a
+  start-up longer than ``RECORDER_WAIT`` + ``stall_timeout`` is a stall.
 * ``realtime``: a wall-clock timer steps the plant ``real_time_factor`` times
   faster than real time; the latest command (by stamp) is in force. Time
   starts once ``startup_subscribers`` readers are matched on ``odom`` (0: at
@@ -65,7 +70,7 @@ from tiltrov_ros.core.validation import (
     failed_thruster_indices,
 )
 
-from .base import OK, THROTTLE, WARN, TiltrovNode, guarded, input_callback
+from .base import OK, RECORDER_WAIT, THROTTLE, WARN, TiltrovNode, guarded, input_callback
 from .conversions import (
     fill_joint_state,
     fill_odometry,
@@ -84,7 +89,8 @@ from .qos import PUBLISHER_QOS, RELIABLE_QOS
 NO_VALUE = 0.0
 #: s (wall): how often the lockstep watchdog looks at the start-up and stall state.
 WATCHDOG_PERIOD = 0.05
-#: s (wall): re-publication period of the initial state until the first commands come.
+#: s (wall): how often the plant looks for readers matched after the initial state went
+#: out, until the first commands come (such a reader gets the initial state again).
 STARTUP_RETRY = 0.25
 #: Most plant steps one realtime timer callback catches up before it re-bases.
 MAX_CATCH_UP = 100
@@ -117,9 +123,13 @@ class PlantSimulator(TiltrovNode):
         self._odom_msg = new_odometry()
         self._joint_msg = new_joint_state(TILTS + THRUSTERS)
         self._clock_msg = ClockMsg()
-        self.create_input_subscription(JointState, THRUST_CMD, self._on_thrust_cmd,
-                                       RELIABLE_QOS)
-        self.create_input_subscription(JointState, TILT_CMD, self._on_tilt_cmd, RELIABLE_QOS)
+        self._command_subs = (
+            self.create_input_subscription(JointState, THRUST_CMD, self._on_thrust_cmd,
+                                           RELIABLE_QOS),
+            self.create_input_subscription(JointState, TILT_CMD, self._on_tilt_cmd,
+                                           RELIABLE_QOS))
+        #: readers matched on odom, joint_states, /clock when the initial state went out
+        self._initial_readers: tuple[int, ...] = ()
 
         # lockstep: tick ns -> [thrusts, tilts] (None: not yet; _REJECTED: bad message)
         self._pending: dict[int, list[list[float] | None]] = {}
@@ -325,6 +335,7 @@ class PlantSimulator(TiltrovNode):
                 return
             self._started = True
             self._started_at = now
+            self._initial_readers = self._state_readers()
             self._publish_state()
             self._advance()
             return
@@ -334,11 +345,17 @@ class PlantSimulator(TiltrovNode):
         waited = seconds(self.steady_ns() - since)
         t = self.plant.time_ns
         if not self._commands_seen:
-            # Start-up: a reader matched late may have missed the initial state.
-            if waited >= STARTUP_RETRY:
+            # Start-up: only a reader matched after the initial state went out misses it.
+            # The others have it (reliable) and may answer late: a node holds its outputs
+            # until the recorder reads them (RECORDER_WAIT at most).
+            readers = self._state_readers()
+            if waited >= STARTUP_RETRY and any(
+                    n > n0 for n, n0 in zip(readers, self._initial_readers)):
                 self.startup_retries += 1
+                self._initial_readers = readers
                 self._republish()
-            return
+            if waited < RECORDER_WAIT + self.config.stall_timeout:
+                return
         if waited >= self.config.stall_timeout:
             self.stalls += 1
             self._stalled = True
@@ -356,11 +373,17 @@ class PlantSimulator(TiltrovNode):
         self._publish_state()
 
     def _peers_ready(self) -> bool:
-        """lockstep: the odom readers and both command publishers; realtime: the readers."""
+        """lockstep: the odom readers and both command publishers matched; realtime: the
+        readers."""
         if self._odom_pub.get_subscription_count() < self.config.startup_subscribers:
             return False
-        return not self.lockstep or (self.count_publishers(THRUST_CMD) > 0
-                                     and self.count_publishers(TILT_CMD) > 0)
+        return not self.lockstep or all(sub.get_publisher_count() > 0
+                                        for sub in self._command_subs)
+
+    def _state_readers(self) -> tuple[int, ...]:
+        """Readers matched on each writer of the state (odom, joint_states, /clock)."""
+        return tuple(pub.get_subscription_count()
+                     for pub in (self._odom_pub, self._joint_pub, self._clock_pub))
 
     # -- realtime --------------------------------------------------------------------
 
