@@ -51,8 +51,10 @@ def _info(path: str) -> int:
     from tiltrov_ros.bag.losses import losses
 
     found = losses(path)
-    print('lost:      ' + ('nothing (the nodes\' counts and the recorder agree)' if not found
-                           else f'{len(found.lines())} finding(s)'))
+    nothing = ("nothing (the nodes' counts and the recorder agree)" if found.whole_run else
+               'nothing the recorder knows of (the nodes\' counts are compared in recordings '
+               'of a whole run, by tiltrov launch --record)')
+    print('lost:      ' + (nothing if not found else f'{len(found.lines())} finding(s)'))
     for line in found.lines():
         print(f'  {line}')
     return 0

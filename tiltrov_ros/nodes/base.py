@@ -29,7 +29,7 @@ from rclpy.subscription import Subscription
 
 from tiltrov_ros.core import validation
 from tiltrov_ros.core.errors import ParameterError
-from tiltrov_ros.core.names import CLOCK, DIAGNOSTICS
+from tiltrov_ros.core.names import CLOCK, DIAGNOSTICS, FINAL_STATUS_KEY
 from tiltrov_ros.core.paramtable import Param, ParamTable
 from tiltrov_ros.core.timebase import NS_PER_S
 from tiltrov_ros.core.validation import MALFORMED, InvalidInput, StampBounds
@@ -48,8 +48,10 @@ DIAGNOSTICS_PERIOD = 1.0
 RECORDER_POLL = 0.02
 RECORDER_WAIT = 10.0
 #: s (wall): how long a node that stops waits at most for its readers to acknowledge
-#: its last messages (below the launcher's SIGINT timeout).
-DELIVERY_WAIT = 3.0
+#: its last messages (below the launcher's SIGINT timeout, stack/supervisor.py). A
+#: reader that fell behind (the recorder on a loaded machine) asks for what it missed
+#: when the writer's next heartbeat comes, up to 3 s later (Fast DDS): a few of those.
+DELIVERY_WAIT = 10.0
 #: Characters of a rejection's detail in a log line (the strings of a message inside it
 #: are already cut by core/validation.shown): a log line stays bounded.
 MAX_DETAIL = 300
@@ -100,9 +102,9 @@ def guarded(method: F) -> F:
     """
 
     @functools.wraps(method)
-    def wrapper(self: TiltrovNode, *args: Any) -> Any:
+    def wrapper(self: TiltrovNode, *args: Any, **kwargs: Any) -> Any:
         try:
-            return method(self, *args)
+            return method(self, *args, **kwargs)
         except Exception as exc:  # the executor must survive anything a callback does
             _callback_failed(self, method.__name__, exc)
             return None
@@ -525,7 +527,10 @@ class TiltrovNode(Node):
         return found
 
     @guarded
-    def publish_diagnostics(self) -> None:
+    def publish_diagnostics(self, final: bool = False) -> None:
+        """Publish this node's status; ``final``: the last one, sent as the node stops
+        (``final: true``): a recording of the whole run that lacks it may have lost the
+        node's last messages (bag/losses.py)."""
         level, message, values = self.diagnostic_status()
         for topic, names in self.extra_sources().items():
             level = max(level, WARN)
@@ -552,6 +557,8 @@ class TiltrovNode(Node):
                        for (topic, reason), n in sorted(self.rejections.items())})
         values.update({f'unsafe_outputs.{topic}': n for topic, n in sorted(self.unsafe.items())})
         values.update({f'published.{topic}': n for topic, n in self.published_counts().items()})
+        if final:
+            values[FINAL_STATUS_KEY] = 'true'
         status = DiagnosticStatus(
             level=bytes([level]), name=f'{self.get_fully_qualified_name()}',
             message=message, hardware_id='tiltrov',

@@ -165,7 +165,7 @@ def main_loop(factory: Callable[[], TiltrovNode], args: list[str] | None, name: 
         # spin_until checks the flag between slices.
         spin_until(executor, context, future if future is not None else Future(),
                    step=STOP_POLL, stop=stop)
-        node.publish_diagnostics()     # the final counts, for the recorder
+        node.publish_diagnostics(final=True)     # the final counts, for the recorder
         node.wait_for_delivery()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass

@@ -106,7 +106,7 @@ def run_single_process(specs: Sequence[NodeSpec], namespace: str, out: Output,
         # have every message before a writer goes.
         for node in nodes:
             if getattr(node, 'stack_node', False):
-                node.publish_diagnostics()
+                node.publish_diagnostics(final=True)
                 node.wait_for_delivery()
         if executor is not None:
             executor.shutdown()

@@ -50,23 +50,26 @@ def launch(options: LaunchOptions, stream: IO[str] | None = None, *,
             code = run_processes(specs, namespace, out, summary, Path(tmp), env,
                                  respawn=options.respawn, monitor=monitor, linger=linger,
                                  status_file=options.status_file)
-    if code == EXIT_OK and options.record is not None:
-        code = check_recording(options.record)
+    if options.record is not None and Path(options.record).exists():
+        lost = report_losses(Path(options.record))
+        if lost and code == EXIT_OK:
+            code = EXIT_FAILED
     return code
 
 
-def check_recording(bag: Path) -> int:
-    """EXIT_OK when the bag has every message the nodes say they published and the
-    recorder lost nothing (bag/losses.py), else one line per loss and EXIT_FAILED."""
+def report_losses(bag: Path) -> bool:
+    """Print one line per loss of the recording (bag/losses.py: topics short of what
+    their publishers say they published, write errors, samples DDS reported lost);
+    True if anything was lost or the bag cannot be read."""
     try:
         found = losses(bag)
     except TiltrovError as exc:
         print(f'tiltrov launch: failed: the bag {bag} cannot be read: {exc}', file=sys.stderr)
-        return EXIT_FAILED
+        return True
     if not found:
-        return EXIT_OK
+        return False
     print(f'tiltrov launch: failed: the recording lost data (tiltrov bag info {bag}):',
           file=sys.stderr)
     for line in found.lines():
         print(f'  {line}', file=sys.stderr)
-    return EXIT_FAILED
+    return True

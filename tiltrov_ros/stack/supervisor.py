@@ -42,8 +42,9 @@ EXIT_FAILED = 1
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
 
-#: s (wall) a node gets to exit after SIGINT, then after SIGTERM, before SIGKILL.
-STOP_TIMEOUTS = (5.0, 3.0)
+#: s (wall) a node gets to exit after SIGINT, then after SIGTERM, before SIGKILL; the
+#: first above the time a stopping node waits for its readers (nodes/base.DELIVERY_WAIT).
+STOP_TIMEOUTS = (13.0, 3.0)
 #: s (wall) the recorder gets to close its bag after SIGINT.
 RECORDER_STOP_TIMEOUT = 20.0
 POLL = 0.05
@@ -298,8 +299,8 @@ def run_processes(specs: Sequence[NodeSpec], namespace: str, out: Output,
             print(f'tiltrov launch: failed: {", ".join(dead) or "a node"} died', file=sys.stderr)
         recorder = next((c for c in supervisor.children if c.spec.name == RECORDER), None)
         if code == EXIT_OK and recorder is not None and recorder.process.returncode != 0:
-            print(f'tiltrov launch: failed: the recording lost data (bag_recorder exit code '
-                  f'{recorder.process.returncode})', file=sys.stderr)
+            print(f'tiltrov launch: failed: bag_recorder exit code '
+                  f'{recorder.process.returncode} (it lost data)', file=sys.stderr)
             code = EXIT_FAILED
         supervisor.report('ended', code)
     return code
