@@ -5,6 +5,7 @@ replay or a stray tool would (docs/reliability.md, "Attacks")."""
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 import signal
 import subprocess
@@ -20,6 +21,7 @@ from ros_stack import (
     KEEP_ALL,
     LaunchProcess,
     Probe,
+    alive,
     diagnostics,
     joint_state,
     odometry,
@@ -423,6 +425,132 @@ def test_recording_into_a_full_disk_fails_the_launch_and_says_what_was_lost(
     assert 'No space left on device' in result.stdout
     assert 'tiltrov launch: failed: the recording lost data' in result.stderr
     assert 'Traceback' not in result.stdout + result.stderr
+
+
+def _bag_info(bag: Path) -> str:
+    result = subprocess.run([sys.executable, '-m', 'tiltrov_ros.cli', 'bag', 'info', str(bag)],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stdout + result.stderr
+    return result.stdout
+
+
+def _stamps(bag: Path) -> dict[str, set[int]]:
+    """The stamps (ms) recorded on each topic that has them."""
+    from tiltrov_ros.bag.bagfile import iter_raw
+    from tiltrov_ros.bag.cdr import leading_stamp_ns
+
+    stamps: dict[str, set[int]] = {}
+    for raw in iter_raw(bag):
+        stamp = leading_stamp_ns(raw.data, raw.msgtype)
+        if stamp is not None:
+            stamps.setdefault(raw.topic, set()).add(stamp // 1_000_000)
+    return stamps
+
+
+@pytest.mark.slow
+def test_a_recorder_that_falls_behind_fails_the_launch_and_bag_info_says_what_was_lost(
+        ros: Any, tmp_path: Path) -> None:
+    """The recorder stopped (SIGSTOP) for 20 s of a realtime run at x5: more samples go
+    by than the writers keep for a reader that does not acknowledge (1000), so the
+    recording loses them for real, as an overloaded recorder does. The launch exits 1
+    with a line per topic short, and ``tiltrov bag info`` says the same (before: exit
+    code 0; an unrelated flood of 147 000 msg/s made the recorder lose 1 874 odom and
+    the launch exited 0 too)."""
+    bag = tmp_path / 'bag'
+    launch = LaunchProcess(tmp_path, '--realtime', '--real-time-factor', '5', '--duration',
+                           '40', '--record', str(bag))
+    try:
+        pids = launch.wait_running()
+        watch = Probe(ros.node('clock_probe'), ['/clock'])
+        assert ros.spin_until(lambda: bool(watch['/clock'])
+                              and _latest_clock(watch) >= 5 * NS_PER_S, timeout=60.0)
+        os.kill(pids['bag_recorder'], signal.SIGSTOP)
+        try:
+            assert ros.spin_until(lambda: _latest_clock(watch) >= 25 * NS_PER_S, timeout=60.0)
+        finally:
+            os.kill(pids['bag_recorder'], signal.SIGCONT)
+        code = launch.finish(timeout=120)
+    finally:
+        launch.cleanup()
+    assert code == 1, launch.output
+    assert 'tiltrov launch: failed: the recording lost data' in launch.output
+    lines = [line.strip() for line in launch.output.splitlines()]
+    for topic in ('/odom', '/joint_states', '/clock'):
+        assert any(line.startswith(f'{topic}: ') and 'published but not recorded' in line
+                   for line in lines), launch.output
+        assert any(line.startswith(f'{topic}: DDS reported') for line in lines), launch.output
+    info = _bag_info(bag)
+    assert 'lost:' in info and '/odom: DDS reported' in info, info
+    assert 'Traceback' not in launch.output
+
+
+@pytest.mark.slow
+def test_a_recorder_behind_at_the_end_of_a_run_loses_nothing(ros: Any, tmp_path: Path) -> None:
+    """The recorder stopped for the last 8 s of sim of a recorded lockstep run and
+    resumed 1.5 s after the plant's last state (a loaded machine: the recorder that far
+    behind when the run ends). Every node waits until its readers acknowledged its
+    messages before it goes: the bag has every step and tick and the launch exits 0
+    (before: the plant waited 0.5 s, the others none after the launcher's SIGINT, and
+    what the recorder had not taken went with them: the last 8 s of every topic lost,
+    exit code 0)."""
+    bag = tmp_path / 'bag'
+    launch = LaunchProcess(tmp_path, '--duration', '30', '--record', str(bag))
+    try:
+        pids = launch.wait_running()
+        watch = Probe(ros.node('clock_probe'), ['/clock'])
+        assert ros.spin_until(lambda: bool(watch['/clock'])
+                              and _latest_clock(watch) >= 22 * NS_PER_S, timeout=120.0)
+        os.kill(pids['bag_recorder'], signal.SIGSTOP)
+        try:
+            assert ros.spin_until(lambda: _latest_clock(watch) == 30 * NS_PER_S,
+                                  timeout=120.0)
+            ros.spin_for(1.5)       # how far behind the recorder is: the attack's input
+        finally:
+            os.kill(pids['bag_recorder'], signal.SIGCONT)
+        code = launch.finish(timeout=120)
+    finally:
+        launch.cleanup()
+    assert code == 0, launch.output
+    stamps = _stamps(bag)
+    steps = set(range(0, 30_001, 10))
+    ticks = set(range(0, 30_000, 50))
+    for topic in ('/odom', '/joint_states', '/clock'):
+        assert stamps[topic] == steps, (topic, len(stamps[topic]))
+    for topic in ('/setpoint', '/setpoint_velocity', '/wrench_cmd', '/thrust_cmd',
+                  '/tilt_cmd', '/wrench_achieved'):
+        assert stamps[topic] == ticks, (topic, len(stamps[topic]))
+    assert "lost:      nothing (the nodes' counts and the recorder agree)" in _bag_info(bag)
+
+
+@pytest.mark.slow
+def test_a_recorder_still_behind_when_the_nodes_give_up_fails_the_launch(
+        ros: Any, tmp_path: Path) -> None:
+    """The recorder stopped for the last 8 s of sim and resumed only once every other
+    node has exited (each gave up waiting for it): their last messages are lost, and
+    the bag cannot even hold their final counts. The launch exits 1 naming each node
+    whose final report is missing, and ``tiltrov bag info`` says the same (before:
+    exit code 0, the bag silently 8 s short)."""
+    bag = tmp_path / 'bag'
+    launch = LaunchProcess(tmp_path, '--duration', '30', '--record', str(bag))
+    try:
+        pids = launch.wait_running()
+        watch = Probe(ros.node('clock_probe'), ['/clock'])
+        assert ros.spin_until(lambda: bool(watch['/clock'])
+                              and _latest_clock(watch) >= 22 * NS_PER_S, timeout=120.0)
+        os.kill(pids['bag_recorder'], signal.SIGSTOP)
+        try:
+            assert ros.spin_until(lambda: not any(alive(pids[n]) for n in STACK),
+                                  timeout=120.0), launch.output
+        finally:
+            os.kill(pids['bag_recorder'], signal.SIGCONT)
+        code = launch.finish(timeout=120)
+    finally:
+        launch.cleanup()
+    assert code == 1, launch.output
+    info = _bag_info(bag)
+    for node in STACK:
+        line = f'/{node}: its final report is not in the bag'
+        assert line in launch.output and line in info, (node, launch.output, info)
 
 
 # --------------------------------------------------------------------------- smaller ones
