@@ -140,6 +140,22 @@ def test_lockstep_a_reader_matched_after_the_initial_state_gets_it_again(rig) ->
     assert node.startup_retries == 1 and probe.stamps('odom') == [0, 0]
 
 
+def test_lockstep_a_command_for_a_tick_not_reached_is_rejected(rig) -> None:
+    """Valid commands stamped for a tick ahead (a tool, a replay): rejected as
+    ``future_stamp``; they do not stand in for the real answers when the tick comes."""
+    ros, probe, command, _ = rig
+    node = _plant(ros, mode='lockstep')
+    assert ros.spin_until(lambda: probe.stamps('odom') == [0])
+    command(5 * STEP, [40.0] * 4, [1.0, 1.0])
+    assert ros.spin_until(lambda: node.rejections[('thrust_cmd', 'future_stamp')] == 1
+                          and node.rejections[('tilt_cmd', 'future_stamp')] == 1)
+    command(0, [1.0] * 4, [0.0, 0.0])
+    assert ros.spin_until(lambda: node.plant.time_ns == 5 * STEP)
+    ros.spin_for(0.2)       # it waits at 50 ms: nothing answered that tick
+    assert node.plant.time_ns == 5 * STEP
+    assert node.plant.thrusters.command_held == (1.0, 1.0, 1.0, 1.0)
+
+
 def test_lockstep_stall_republishes_the_tick_and_is_reported(rig) -> None:
     ros, probe, command, _ = rig
     node = _plant(ros, mode='lockstep', stall_timeout=0.05)

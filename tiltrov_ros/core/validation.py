@@ -103,6 +103,18 @@ def check_stamp(sec: int, nanosec: int, now_ns: int | None, bounds: StampBounds)
     return ns
 
 
+def check_answerable(ns: int, state_ns: int, step_ns: int) -> None:
+    """A command stamped ``ns`` must answer a state already published: the plant's,
+    stamped ``state_ns`` at the latest. One plant step ``step_ns`` later is allowed (a
+    watchdog's answer, stamped just after its node's clock); anything later is a
+    command for a time that has not come, which would stand in for the real answers
+    (rejected: ``future_stamp``, whatever ``stamp_max_future`` allows)."""
+    if ns - state_ns > step_ns:
+        raise InvalidInput(FUTURE_STAMP, f'stamp {format_ns(ns)} is after the latest state '
+                                         f'({format_ns(state_ns)}): no state it can answer has '
+                                         'been published')
+
+
 def is_stale(stamp: int, now_ns: int | None, timeout_ns: int) -> bool:
     """True when data stamped ``stamp`` is older than ``timeout_ns`` on the clock ``now_ns``.
 

@@ -31,6 +31,10 @@ Modes (parameter ``mode``):
   starts once ``startup_subscribers`` readers are matched on ``odom`` (0: at
   once), so a controller started with the plant is there from t = 0.
 
+In both modes a command stamped more than one plant step after the plant's
+time is rejected (``future_stamp``): it answers no state yet published, and,
+latest by stamp, it would shut out the real answers until its time.
+
 With ``duration`` > 0 the plant stops at that sim time (after publishing the
 state at ``duration``) and :attr:`PlantSimulator.finished` completes; with
 ``exit_at_end`` the process then exits with code 0 once every reader has
@@ -66,6 +70,7 @@ from tiltrov_ros.core.scenarios import failed_at
 from tiltrov_ros.core.timebase import format_ns, seconds, to_ns
 from tiltrov_ros.core.validation import (
     InvalidInput,
+    check_answerable,
     checked_stamp_ns,
     failed_thruster_indices,
 )
@@ -216,6 +221,7 @@ class PlantSimulator(TiltrovNode):
                               or self.finished.done()):
             return   # a re-published answer to a tick already passed
         ns = self.check_header(msg.header, None)
+        check_answerable(ns, self.plant.time_ns, self.config.step_ns)
         values = joint_state_values(msg, names, field)
         if not self.lockstep:
             if ns >= self._last_applied[kind]:
