@@ -48,6 +48,15 @@ def _info(path: str) -> int:
         print(f'  {name:<{width}}  {topic.count:>8}  {topic.msgtype}')
     if info.run_info:
         print(f'run_info:  {json.dumps(info.run_info, sort_keys=True)}')
+    from tiltrov_ros.bag.losses import losses
+
+    found = losses(path)
+    nothing = ("nothing (the nodes' counts and the recorder agree)" if found.whole_run else
+               'nothing the recorder knows of (the nodes\' counts are compared in recordings '
+               'of a whole run, by tiltrov launch --record)')
+    print('lost:      ' + (nothing if not found else f'{len(found.lines())} finding(s)'))
+    for line in found.lines():
+        print(f'  {line}')
     return 0
 
 

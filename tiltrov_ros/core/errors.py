@@ -26,6 +26,10 @@ class ParameterError(TiltrovError, ValueError):
         super().__init__(f'parameter {name!r}{where}: {message}')
 
 
+class UnreadableFileError(TiltrovError, ValueError):
+    """A file given or edited by the user cannot be read as YAML (the message names it)."""
+
+
 class ScenarioError(TiltrovError, ValueError):
     """A scenario file or scenario description is invalid."""
 

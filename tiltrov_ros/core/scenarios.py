@@ -58,14 +58,14 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-import yaml
 
 from tiltrov_ros.core.controllers import Reference
 from tiltrov_ros.core.disturbances import Disturbances
-from tiltrov_ros.core.errors import ParameterError, ScenarioError
+from tiltrov_ros.core.errors import ParameterError, ScenarioError, UnreadableFileError
 from tiltrov_ros.core.kinematics import quat_from_euler
 from tiltrov_ros.core.names import DOF_NAMES
 from tiltrov_ros.core.params import RobotParams
+from tiltrov_ros.core.yamlfile import read_yaml
 from tiltrov_ros.paths import scenario_dir
 
 FloatArray = NDArray[np.float64]
@@ -228,11 +228,10 @@ def load_scenario_document(name_or_path: str | Path) -> tuple[Mapping[str, Any],
                                 f'{", ".join(scenario_names())}; or give a path to a .yaml file')
     if not path.is_file():
         raise ScenarioError(f'scenario file not found: {path}')
-    with path.open(encoding='utf-8') as stream:
-        try:
-            doc = yaml.safe_load(stream)
-        except yaml.YAMLError as exc:
-            raise ScenarioError(f'{path}: not valid YAML: {exc}') from exc
+    try:
+        doc = read_yaml(path)
+    except UnreadableFileError as exc:
+        raise ScenarioError(str(exc)) from None
     if not isinstance(doc, Mapping):
         raise ScenarioError(f'{path}: a scenario is a YAML mapping')
     return doc, path
