@@ -12,7 +12,7 @@ OUT    ?= runs/demo
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export MPLBACKEND ?= Agg
 
-.PHONY: install ros2-cli demo test lint typecheck bench soak figures docs clean help
+.PHONY: install ros2-cli demo test lint typecheck bench soak figures docs campaign clean help
 
 # The real ros2 command line (ros2cli, launch, launch_ros as wheels, with an install.sh)
 # for the tests that drive the package as a ROS user does: installed into .venv by
@@ -28,6 +28,7 @@ help:
 	@echo "make soak     one hour of simulated time in lockstep (not part of make test)"
 	@echo "make figures  regenerate the results page (docs/results.md) and its figures"
 	@echo "make docs     regenerate docs/parameters.md from the parameter tables"
+	@echo "make campaign a small random station-keeping campaign on a local Dask cluster"
 
 install: $(STAMP)
 
@@ -35,7 +36,7 @@ $(STAMP): setup.py setup.cfg package.xml requirements/ros-jazzy.txt requirements
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -c requirements/constraints.txt \
-		-r requirements/ros-jazzy.txt -e '.[bags,dev]'
+		-r requirements/ros-jazzy.txt -e '.[bags,campaign,dev]'
 	@# colcon must never crawl into the venv (the ROS wheels ship package.xml files).
 	@touch $(VENV)/COLCON_IGNORE
 	@touch $(STAMP)
@@ -69,6 +70,14 @@ figures: $(STAMP)
 
 docs: $(STAMP)
 	$(PY) -m tiltrov_ros.nodes.parameter_docs docs/parameters.md
+
+# A small version by default; `make campaign SAMPLES=200 CAMPAIGN_OUT=runs/camp` for the
+# real one. --resume: run again, it only finishes what is missing and re-summarizes.
+SAMPLES      ?= 8
+CAMPAIGN_OUT ?= runs/campaign-$(SAMPLES)
+campaign: $(STAMP)
+	$(VENV)/bin/tiltrov campaign config/campaigns/station_keeping.yaml --samples $(SAMPLES) \
+		--out $(CAMPAIGN_OUT) --resume
 
 clean:
 	rm -rf $(VENV) build install log .pytest_cache .mypy_cache .ruff_cache runs

@@ -7,7 +7,13 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+import json
+import os
 from pathlib import Path
+import signal
+import subprocess
+import sys
+import threading
 import time
 from typing import Any
 
@@ -246,3 +252,79 @@ def installed(name: str) -> Path:
     found = executable(name)
     assert found is not None, f'{name} is not installed (ament index, PATH, venv bin)'
     return found
+
+
+# --------------------------------------------------------------------------- processes
+
+
+class LaunchProcess:
+    """``tiltrov launch`` as a process: its output (read by a thread, so the pipe never
+    fills) and its ``--status-file`` (the pids of the nodes it started, its state)."""
+
+    def __init__(self, tmp_path: Path, *args: str) -> None:
+        self.status_path = tmp_path / 'launch_status.json'
+        self.process = subprocess.Popen(
+            [sys.executable, '-m', 'tiltrov_ros.cli', 'launch', *args, '--status-file',
+             str(self.status_path)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+            text=True, cwd=tmp_path)
+        self.lines: list[str] = []
+        self._reader = threading.Thread(
+            target=lambda: self.lines.extend(self.process.stdout or ()), daemon=True)
+        self._reader.start()
+        self.seen: set[int] = set()      # every pid the status file ever named
+
+    @property
+    def output(self) -> str:
+        return ''.join(self.lines)
+
+    def status(self) -> dict[str, Any]:
+        try:
+            status = json.loads(self.status_path.read_text())
+        except (FileNotFoundError, json.JSONDecodeError):
+            return {}
+        self.seen |= {node['pid'] for node in status['nodes'].values()}
+        return status
+
+    def pids(self) -> dict[str, int]:
+        return {name: node['pid'] for name, node in self.status().get('nodes', {}).items()}
+
+    def wait_running(self, timeout: float = 60.0) -> dict[str, int]:
+        """The nodes' pids once every node is started (state ``running``)."""
+        deadline = time.monotonic() + timeout
+        while self.status().get('state') != 'running':
+            assert time.monotonic() < deadline and self.process.poll() is None, self.output
+            time.sleep(0.05)
+        return self.pids()
+
+    def finish(self, timeout: float) -> int:
+        code = self.process.wait(timeout=timeout)
+        self._reader.join(timeout=5)
+        return code
+
+    def cleanup(self) -> None:
+        """Whatever a failed test left running: the launcher and the nodes it started."""
+        if self.process.poll() is None:
+            self.process.kill()
+            self.process.wait(timeout=10)
+        self.status()
+        for pid in self.seen:
+            if alive(pid):
+                os.kill(pid, signal.SIGKILL)
+
+
+def ready(ros: Any, names: Sequence[str], until: Any = None,
+           timeout: float = 60.0) -> Probe:
+    """Spin until every node in ``names`` has published /diagnostics (it is built and
+    spinning, its signal handlers installed) and ``until(probe)`` holds."""
+    probe = Probe(ros.node('launch_probe'), ['/diagnostics'])
+    assert ros.spin_until(lambda: all(diagnostics(probe, name) for name in names)
+                          and (until is None or until(probe)), timeout=timeout)
+    return probe
+
+
+def alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True

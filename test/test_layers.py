@@ -81,7 +81,7 @@ MODULES = sorted(PACKAGE.rglob('*.py'))
 
 def test_every_module_belongs_to_a_layer_of_the_table() -> None:
     rules = _rules()
-    assert set(rules) == {'base', 'core', 'bag', 'nodes', 'analysis', 'stack', 'cli'}
+    assert set(rules) == {'base', 'core', 'bag', 'nodes', 'analysis', 'campaign', 'stack', 'cli'}
     layers = {_layer(_module_name(path)) for path in MODULES}
     assert layers <= set(rules), layers - set(rules)
 
@@ -107,10 +107,11 @@ ROS_PACKAGES = {'rclpy', 'rosidl_runtime_py', 'std_msgs', 'geometry_msgs', 'nav_
                 'sensor_msgs', 'rosgraph_msgs', 'diagnostic_msgs', 'builtin_interfaces'}
 
 
-def test_the_analysis_loads_no_ros() -> None:
-    """The analysis of runs and bags needs no ROS install (the core's own test:
-    test/core/test_core_is_ros_free.py)."""
-    modules = sorted(_module_name(p) for p in (PACKAGE / 'analysis').rglob('*.py'))
+@pytest.mark.parametrize('package', ['analysis', 'campaign'])
+def test_the_analysis_and_the_campaigns_load_no_ros(package: str) -> None:
+    """The analysis of runs and bags and the campaigns need no ROS install (the
+    core's own test: test/core/test_core_is_ros_free.py)."""
+    modules = sorted(_module_name(p) for p in (PACKAGE / package).rglob('*.py'))
     code = (
         'import importlib, sys\n'
         f'for name in {modules!r}:\n'

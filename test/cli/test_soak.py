@@ -27,8 +27,8 @@ def test_short_soak_reports_memory_counts_and_stalls(tmp_path: Path) -> None:
                                   'thrust_allocator', 'reference_publisher'}
     assert all(row['start_kib'] > 0 and row['end_kib'] > 0 for row in report['rss'].values())
     counts = report['messages']
-    assert counts['odom'] == {'published': 201, 'recorded': 201}
-    assert counts['thrust_cmd'] == {'published': 40, 'recorded': 40}
+    assert counts['/odom'] == {'published': 201, 'recorded': 201}
+    assert counts['/thrust_cmd'] == {'published': 40, 'recorded': 40}
     assert all(c['published'] == c['recorded'] for c in counts.values())
     assert report['lost'] == {}
     assert 'published' in result.stdout and 'RSS' in result.stdout

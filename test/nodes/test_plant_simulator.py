@@ -113,6 +113,50 @@ def test_lockstep_rejected_command_holds_the_previous_and_advances(rig) -> None:
     assert ros.spin_until(lambda: probe.stamps('odom') == [i * STEP for i in range(16)])
 
 
+def test_lockstep_a_late_first_answer_gets_the_initial_state_once(rig) -> None:
+    """The first commands 1.5 s late (as when the controller holds its outputs until the
+    bag recorder reads them): the initial state goes out once, so a recording has one
+    state per step (before: again every 0.25 s, each recorded)."""
+    ros, probe, command, _ = rig
+    node = _plant(ros, mode='lockstep')
+    assert ros.spin_until(lambda: probe.stamps('odom') == [0])
+    ros.spin_for(1.5)       # the late answer is the input: nothing may happen meanwhile
+    command(0, [0.0] * 4, [0.0, 0.0])
+    assert ros.spin_until(lambda: node.plant.time_ns == 5 * STEP)
+    steps = [i * STEP for i in range(6)]
+    assert ros.spin_until(lambda: probe.stamps('/clock') == steps)
+    assert probe.stamps('odom') == probe.stamps('joint_states') == steps
+    assert (node.startup_retries, node.stalls) == (0, 0)
+
+
+def test_lockstep_a_reader_matched_after_the_initial_state_gets_it_again(rig) -> None:
+    """A reader of odom matched once the initial state is out (a node started late)
+    cannot have it: the plant publishes it again."""
+    ros, probe, _command, _ = rig
+    node = _plant(ros, mode='lockstep')
+    assert ros.spin_until(lambda: probe.stamps('odom') == [0])
+    late = Probe(ros.node('late_reader'), ['odom'])
+    # Both readers' copies (one publish; either may be taken first).
+    assert ros.spin_until(lambda: late.stamps('odom') == [0] and probe.stamps('odom') == [0, 0])
+    assert node.startup_retries == 1
+
+
+def test_lockstep_a_command_for_a_tick_not_reached_is_rejected(rig) -> None:
+    """Valid commands stamped for a tick ahead (a tool, a replay): rejected as
+    ``future_stamp``; they do not stand in for the real answers when the tick comes."""
+    ros, probe, command, _ = rig
+    node = _plant(ros, mode='lockstep')
+    assert ros.spin_until(lambda: probe.stamps('odom') == [0])
+    command(5 * STEP, [40.0] * 4, [1.0, 1.0])
+    assert ros.spin_until(lambda: node.rejections[('thrust_cmd', 'future_stamp')] == 1
+                          and node.rejections[('tilt_cmd', 'future_stamp')] == 1)
+    command(0, [1.0] * 4, [0.0, 0.0])
+    assert ros.spin_until(lambda: node.plant.time_ns == 5 * STEP)
+    ros.spin_for(0.2)       # it waits at 50 ms: nothing answered that tick
+    assert node.plant.time_ns == 5 * STEP
+    assert node.plant.thrusters.command_held == (1.0, 1.0, 1.0, 1.0)
+
+
 def test_lockstep_stall_republishes_the_tick_and_is_reported(rig) -> None:
     ros, probe, command, _ = rig
     node = _plant(ros, mode='lockstep', stall_timeout=0.05)

@@ -3,20 +3,19 @@ respawn."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-import json
 import os
 from pathlib import Path
 import signal
 import subprocess
 import sys
-import threading
-import time
 from typing import Any
 
 import numpy as np
 import pytest
 from ros_stack import MS, Probe, diagnostics
+from ros_stack import LaunchProcess as _Launch
+from ros_stack import alive as _alive
+from ros_stack import ready as _ready
 
 from tiltrov_ros.core.names import PLANT
 from tiltrov_ros.core.runner import run_scenario, stack_config
@@ -55,78 +54,6 @@ def test_a_node_failing_at_start_stops_the_launch(tmp_path: Path) -> None:
     assert 'wrench_controller died (exit code 1)' in result.stdout
     assert 'switching.dwell_time' in result.stdout
     assert 'wrench_controller' in result.stderr
-
-
-class _Launch:
-    """``tiltrov launch`` as a process: its output (read by a thread, so the pipe never
-    fills) and its ``--status-file`` (the pids of the nodes it started, its state)."""
-
-    def __init__(self, tmp_path: Path, *args: str) -> None:
-        self.status_path = tmp_path / 'launch_status.json'
-        self.process = subprocess.Popen(
-            _tiltrov(*args, '--status-file', str(self.status_path)), stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT, text=True, cwd=tmp_path)
-        self.lines: list[str] = []
-        self._reader = threading.Thread(
-            target=lambda: self.lines.extend(self.process.stdout or ()), daemon=True)
-        self._reader.start()
-        self.seen: set[int] = set()      # every pid the status file ever named
-
-    @property
-    def output(self) -> str:
-        return ''.join(self.lines)
-
-    def status(self) -> dict[str, Any]:
-        try:
-            status = json.loads(self.status_path.read_text())
-        except (FileNotFoundError, json.JSONDecodeError):
-            return {}
-        self.seen |= {node['pid'] for node in status['nodes'].values()}
-        return status
-
-    def pids(self) -> dict[str, int]:
-        return {name: node['pid'] for name, node in self.status().get('nodes', {}).items()}
-
-    def wait_running(self, timeout: float = 60.0) -> dict[str, int]:
-        """The nodes' pids once every node is started (state ``running``)."""
-        deadline = time.monotonic() + timeout
-        while self.status().get('state') != 'running':
-            assert time.monotonic() < deadline and self.process.poll() is None, self.output
-            time.sleep(0.05)
-        return self.pids()
-
-    def finish(self, timeout: float) -> int:
-        code = self.process.wait(timeout=timeout)
-        self._reader.join(timeout=5)
-        return code
-
-    def cleanup(self) -> None:
-        """Whatever a failed test left running: the launcher and the nodes it started."""
-        if self.process.poll() is None:
-            self.process.kill()
-            self.process.wait(timeout=10)
-        self.status()
-        for pid in self.seen:
-            if _alive(pid):
-                os.kill(pid, signal.SIGKILL)
-
-
-def _ready(ros: Any, names: Sequence[str], until: Any = None,
-           timeout: float = 60.0) -> Probe:
-    """Spin until every node in ``names`` has published /diagnostics (it is built and
-    spinning, its signal handlers installed) and ``until(probe)`` holds."""
-    probe = Probe(ros.node('launch_probe'), ['/diagnostics'])
-    assert ros.spin_until(lambda: all(diagnostics(probe, name) for name in names)
-                          and (until is None or until(probe)), timeout=timeout)
-    return probe
-
-
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    return True
 
 
 @pytest.mark.slow
@@ -181,6 +108,30 @@ def test_record_gives_a_bag_equal_to_the_headless_run(tmp_path: Path,
                  'thrust_cmd', 'tilt_cmd', 'wrench_achieved'):
         np.testing.assert_allclose(getattr(recorded, name), getattr(expected, name),
                                    rtol=0, atol=1e-9, err_msg=name)
+
+
+@pytest.mark.slow
+def test_a_late_first_answer_records_one_message_per_step_and_tick(tmp_path: Path) -> None:
+    """A recorded lockstep run whose controller waits for a recorder that is not there
+    (``wait_for_recorder`` naming another node): its first answer comes after that
+    wait's 10 s. The plant waits without publishing its initial state again, and the
+    bag has one message per step and per tick on every topic (before: the initial
+    state every 0.25 s, each recorded, and an answer to each)."""
+    from tiltrov_ros.bag.bagfile import bag_info
+
+    bag = tmp_path / 'bag'
+    result = subprocess.run(
+        _tiltrov('--duration', '2', '--record', str(bag),
+                 '--param', 'wrench_controller:wait_for_recorder:=another_recorder'),
+        capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert 'another_recorder does not read every topic of this node after 10 s' in result.stdout
+    counts = {name: topic.count for name, topic in bag_info(bag).topics.items()}
+    for topic in ('/odom', '/joint_states', '/clock'):
+        assert counts[topic] == 201, counts
+    for topic in ('/setpoint', '/setpoint_velocity', '/wrench_cmd', '/thrust_cmd',
+                  '/tilt_cmd', '/wrench_achieved'):
+        assert counts[topic] == 40, counts
 
 
 @pytest.mark.slow

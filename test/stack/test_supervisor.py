@@ -22,3 +22,10 @@ def test_status_file_is_replaced_whole_at_each_write(tmp_path: Path) -> None:
 def test_no_status_file_without_a_path(tmp_path: Path) -> None:
     StatusFile(None).write('running', {})
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_stopping_node_has_time_to_wait_for_its_readers_before_sigterm() -> None:
+    from tiltrov_ros.nodes.base import DELIVERY_WAIT
+    from tiltrov_ros.stack.supervisor import STOP_TIMEOUTS
+
+    assert STOP_TIMEOUTS[0] > DELIVERY_WAIT + 1.0

@@ -36,10 +36,13 @@ def one_line(exc: BaseException) -> str:
     return ' '.join(str(exc).split()) or type(exc).__name__
 
 
-def resolve(scenario: str, controller: str | None, allocator: str | None) -> StackConfig:
+def resolve(scenario: str, controller: str | None, allocator: str | None, *,
+            controller_file: Path | None = None,
+            allocator_file: Path | None = None) -> StackConfig:
     """A StackConfig, or :class:`InputError` for anything wrong in the input files."""
     try:
-        return stack_config(scenario, controller, allocator_mode=allocator)
+        return stack_config(scenario, controller, allocator_mode=allocator,
+                            controller_file=controller_file, allocator_file=allocator_file)
     except (TiltrovError, yaml.YAMLError, OSError) as exc:
         raise InputError(one_line(exc)) from exc
 

@@ -36,6 +36,8 @@ COMMANDS: dict[str, Command] = {
                                'against baselines measured in the same run)'),
     'soak': Command('.soak', 'one hour of simulated time in lockstep, recorded: RSS of each '
                              'process, messages published vs recorded, stalls'),
+    'campaign': Command('.campaign', 'Monte-Carlo runs of a campaign file on Dask: hold '
+                                         'rate per configuration, table, figures'),
 }
 
 

@@ -43,6 +43,7 @@ def run(args: argparse.Namespace) -> int:
 def _info(path: str) -> int:
     from tiltrov_ros.bag.bagfile import bag_info
     from tiltrov_ros.bag.integrity import check_file
+    from tiltrov_ros.bag.losses import losses
     from tiltrov_ros.bag.repair import find_mcap
 
     info = bag_info(path)
@@ -56,6 +57,13 @@ def _info(path: str) -> int:
         print(f'run_info:  {json.dumps(info.run_info, sort_keys=True)}')
     integrity = check_file(find_mcap(path)[1])
     print(f'integrity: {integrity.summary()}')
+    found = losses(path)
+    nothing = ("nothing (the nodes' counts and the recorder agree)" if found.whole_run else
+               'nothing the recorder knows of (the nodes\' counts are compared in recordings '
+               'of a whole run, by tiltrov launch --record)')
+    print('lost:      ' + (nothing if not found else f'{len(found.lines())} finding(s)'))
+    for line in found.lines():
+        print(f'  {line}')
     return 1 if integrity.damaged else 0
 
 

@@ -50,6 +50,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                             f'{",".join(CONTROLLER_KINDS)}) and overlay them')
     parser.add_argument('--allocator', choices=ALLOCATOR_MODES,
                         help='allocator mode (default: config/thrust_allocator.yaml)')
+    parser.add_argument('--controller-file', type=Path, metavar='FILE',
+                        help='wrench_controller parameter file (default: the shipped one)')
+    parser.add_argument('--allocator-file', type=Path, metavar='FILE',
+                        help='thrust_allocator parameter file (default: the shipped one)')
     parser.add_argument('--duration', type=float, metavar='SEC',
                         help="simulated seconds (default: the scenario's)")
     parser.add_argument('--out', type=Path, default=Path('runs/sim'), metavar='DIR',
@@ -71,7 +75,8 @@ def _controllers(args: argparse.Namespace) -> list[str | None]:
 
 def _run(args: argparse.Namespace) -> list[Path]:
     kinds = _controllers(args)
-    configs = [resolve(args.scenario, kind, args.allocator) for kind in kinds]
+    configs = [resolve(args.scenario, kind, args.allocator, controller_file=args.controller_file,
+                       allocator_file=args.allocator_file) for kind in kinds]
     logs = [simulate(config, args.duration) for config in configs]
     written: list[Path] = []
     out: Path = args.out

@@ -30,7 +30,7 @@ import time
 from typing import Any
 
 from tiltrov_ros.core.controllers import CONTROLLER_KINDS
-from tiltrov_ros.core.names import CLOCK, DIAGNOSTICS, PLANT, STACK_TOPICS
+from tiltrov_ros.core.names import DIAGNOSTICS, PLANT
 from tiltrov_ros.stack.launch import launch
 from tiltrov_ros.stack.specs import LaunchOptions
 from tiltrov_ros.stack.supervisor import EXIT_FAILED, EXIT_OK, EXIT_USAGE, Monitor
@@ -94,45 +94,6 @@ class RssMonitor(Monitor):
                 for name in self.first}
 
 
-def final_diagnostics(bag: Path) -> tuple[dict[str, dict[str, str]], list[float]]:
-    """The last /diagnostics values of each node in ``bag``, and the plant's achieved
-    real-time factors in order."""
-    from tiltrov_ros.bag.bagfile import iter_raw
-    from tiltrov_ros.bag.msgdefs import typestore
-
-    store = typestore()
-    last: dict[str, dict[str, str]] = {}
-    rtf: list[float] = []
-    for raw in iter_raw(bag, ['/diagnostics']):
-        msg = store.deserialize_cdr(raw.data, raw.msgtype)
-        for status in msg.status:
-            name = status.name.rsplit('/', 1)[-1]
-            values = {kv.key: kv.value for kv in status.values}
-            last[name] = values
-            if name == PLANT and 'real_time_factor_achieved' in values:
-                rtf.append(float(values['real_time_factor_achieved']))
-    return last, rtf
-
-
-def message_counts(bag: Path, diagnostics: Mapping[str, Mapping[str, str]]
-                   ) -> dict[str, dict[str, int]]:
-    """Per stack topic: published (the nodes' counts) and recorded (the bag's)."""
-    from tiltrov_ros.bag.bagfile import bag_info
-
-    info = bag_info(bag)
-    recorded = {name.lstrip('/') if name != CLOCK else name: t.count
-                for name, t in info.topics.items()}
-    out: dict[str, dict[str, int]] = {}
-    for topic in STACK_TOPICS:
-        if topic == DIAGNOSTICS:
-            continue
-        published = sum(int(values.get(f'published.{topic}', 0))
-                        for values in diagnostics.values())
-        if published or recorded.get(topic):
-            out[topic] = {'published': published, 'recorded': recorded.get(topic, 0)}
-    return out
-
-
 def _mean(values: list[float]) -> float | None:
     return sum(values) / len(values) if values else None
 
@@ -170,15 +131,19 @@ def run(args: argparse.Namespace) -> int:
     if not bag.exists():
         print('tiltrov soak: no bag was written', file=sys.stderr)
         return EXIT_FAILED
-    diagnostics, rtf = final_diagnostics(bag)
+    from tiltrov_ros.bag.losses import final_diagnostics, message_counts
+
+    diagnostics, statuses = final_diagnostics(bag)
     counts = message_counts(bag, diagnostics)
-    plant = diagnostics.get(PLANT, {})
+    plant = next((v for k, v in diagnostics.items() if k.rsplit('/', 1)[-1] == PLANT), {})
+    rtf = [float(s['real_time_factor_achieved']) for s in statuses
+           if s['_name'].rsplit('/', 1)[-1] == PLANT and 'real_time_factor_achieved' in s]
     tenth = max(1, len(rtf) // 10)
     result: dict[str, Any] = {
         'duration': args.duration, 'scenario': args.scenario, 'wall_seconds': wall,
         'launch_exit_code': code, 'rss': monitor.table(), 'messages': counts,
         'lost': {t: c['published'] - c['recorded'] for t, c in counts.items()
-                 if c['published'] != c['recorded']},
+                 if c['published'] != c['recorded'] and t != DIAGNOSTICS},
         'stalls': int(plant.get('stalls', -1)),
         'sim_time_reached': float(plant.get('sim_time', 'nan')),
         'real_time_factor': {'first_tenth': _mean(rtf[:tenth]),

@@ -51,6 +51,9 @@ WRENCH_ACHIEVED = 'wrench_achieved'
 CLOCK = '/clock'
 DIAGNOSTICS = '/diagnostics'
 ROBOT_MARKERS = 'robot_markers'
+#: Key of a node's last /diagnostics status, sent as it stops (value 'true'): a recording
+#: of the whole run without it may lack the node's last messages.
+FINAL_STATUS_KEY = 'final'
 
 #: Every topic of the stack -> its ROS 2 type, in the order the stack publishes
 #: them within a step and a tick.

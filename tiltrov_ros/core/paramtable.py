@@ -25,9 +25,8 @@ from numbers import Integral, Real
 from pathlib import Path
 from typing import Any, Literal
 
-import yaml
-
 from tiltrov_ros.core.errors import ParameterError
+from tiltrov_ros.core.yamlfile import read_yaml
 
 #: float, int, bool, str, and arrays of floats, ints or strs.
 Kind = Literal['float', 'int', 'bool', 'str', 'floats', 'ints', 'strs']
@@ -263,10 +262,10 @@ def ros_parameters(path: str | Path, *, node: str | None = None,
     """The ``ros__parameters`` of a ROS 2 parameter file section: the section of
     ``node``, or the first section that has the key ``having``; None if none.
 
-    Raises OSError and yaml.YAMLError as reading the file does.
+    Raises :class:`~tiltrov_ros.core.errors.UnreadableFileError` for a file that
+    cannot be read as YAML.
     """
-    with Path(path).open(encoding='utf-8') as stream:
-        document = yaml.safe_load(stream)
+    document = read_yaml(path)
     if not isinstance(document, Mapping):
         return None
     sections = [document.get(node)] if node is not None else list(document.values())

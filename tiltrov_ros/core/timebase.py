@@ -41,9 +41,10 @@ def ns_to_stamp(ns: int) -> tuple[int, int]:
     return sec, nanosec
 
 
-def cdr_stamp_ns(data: bytes | memoryview) -> int:
-    """The stamp (ns) at the start of a serialized message: the first field of a
-    ``std_msgs/Header`` or a ``builtin_interfaces/Time`` (``rosgraph_msgs/Clock``).
+def cdr_stamp(data: bytes | memoryview) -> tuple[int, int]:
+    """``(sec, nanosec)`` of the stamp at the start of a serialized message: the
+    first field of a ``std_msgs/Header`` or a ``builtin_interfaces/Time``
+    (``rosgraph_msgs/Clock``), as sent (not checked: ``sec`` may be negative).
 
     CDR: a 4-byte encapsulation (byte 1: 1 = little endian, 0 = big endian),
     then the stamp's ``int32 sec`` and ``uint32 nanosec``. Raises ValueError
@@ -53,7 +54,12 @@ def cdr_stamp_ns(data: bytes | memoryview) -> int:
         raise ValueError(f'a serialized message of {len(data)} bytes has no stamp')
     layout = _STAMP_LE if data[1] == 1 else _STAMP_BE
     sec, nanosec = layout.unpack_from(data, CDR_ENCAPSULATION)
-    return stamp_to_ns(sec, nanosec)
+    return int(sec), int(nanosec)
+
+
+def cdr_stamp_ns(data: bytes | memoryview) -> int:
+    """The stamp (ns) at the start of a serialized message (:func:`cdr_stamp`)."""
+    return stamp_to_ns(*cdr_stamp(data))
 
 
 def format_ns(ns: int) -> str:

@@ -34,10 +34,11 @@ BAD_QUATERNION = 'bad_quaternion'  # norm not within QUATERNION_TOLERANCE of 1
 BAD_STAMP = 'bad_stamp'            # negative time or nanosec >= 1e9
 FUTURE_STAMP = 'future_stamp'      # more than max_future ahead of the node's clock
 OLD_STAMP = 'old_stamp'            # more than max_age behind the node's clock
+MALFORMED = 'malformed'            # bytes that do not decode as the topic's type (cut CDR)
 
 #: Every rejection reason, as counted on /diagnostics.
 REASONS = (NON_FINITE, WRONG_LENGTH, UNKNOWN_JOINT, MISSING_JOINT, DUPLICATE_JOINT,
-           WRONG_FRAME, BAD_QUATERNION, BAD_STAMP, FUTURE_STAMP, OLD_STAMP)
+           WRONG_FRAME, BAD_QUATERNION, BAD_STAMP, FUTURE_STAMP, OLD_STAMP, MALFORMED)
 #: Reasons that concern the stamp itself: a node never answers with such a stamp.
 STAMP_REASONS = (BAD_STAMP, FUTURE_STAMP, OLD_STAMP)
 
@@ -102,6 +103,18 @@ def check_stamp(sec: int, nanosec: int, now_ns: int | None, bounds: StampBounds)
     return ns
 
 
+def check_answerable(ns: int, state_ns: int, step_ns: int) -> None:
+    """A command stamped ``ns`` must answer a state already published: the plant's,
+    stamped ``state_ns`` at the latest. One plant step ``step_ns`` later is allowed (a
+    watchdog's answer, stamped just after its node's clock); anything later is a
+    command for a time that has not come, which would stand in for the real answers
+    (rejected: ``future_stamp``, whatever ``stamp_max_future`` allows)."""
+    if ns - state_ns > step_ns:
+        raise InvalidInput(FUTURE_STAMP, f'stamp {format_ns(ns)} is after the latest state '
+                                         f'({format_ns(state_ns)}): no state it can answer has '
+                                         'been published')
+
+
 def is_stale(stamp: int, now_ns: int | None, timeout_ns: int) -> bool:
     """True when data stamped ``stamp`` is older than ``timeout_ns`` on the clock ``now_ns``.
 
@@ -111,9 +124,21 @@ def is_stale(stamp: int, now_ns: int | None, timeout_ns: int) -> bool:
     return now_ns is not None and timeout_ns > 0 and now_ns - stamp > timeout_ns
 
 
+#: Characters of a string from a message shown in a log line or an error.
+MAX_SHOWN = 64
+
+
+def shown(text: str, limit: int = MAX_SHOWN) -> str:
+    """``repr(text)``, cut to ``limit`` characters with the length said: strings from
+    messages reach the logs only through this (a 1 MB frame_id must not)."""
+    if len(text) <= limit:
+        return repr(text)
+    return f'{text[:limit]!r}... ({len(text)} characters)'
+
+
 def check_frame(frame_id: str, expected: str, field: str = 'frame_id') -> None:
     if frame_id != expected:
-        raise InvalidInput(WRONG_FRAME, f'{field} {frame_id!r}; expected {expected!r}')
+        raise InvalidInput(WRONG_FRAME, f'{field} {shown(frame_id)}; expected {expected!r}')
 
 
 def check_finite(values: Iterable[float], what: str) -> None:
@@ -145,10 +170,10 @@ def joint_values(names: Sequence[str], arrays: dict[str, Sequence[float]],
     seen: set[str] = set()
     for name in names:
         if name in seen:
-            raise InvalidInput(DUPLICATE_JOINT, f'joint {name!r} appears twice')
+            raise InvalidInput(DUPLICATE_JOINT, f'joint {shown(name)} appears twice')
         seen.add(name)
         if name not in permitted:
-            raise InvalidInput(UNKNOWN_JOINT, f'unknown joint {name!r}; allowed: '
+            raise InvalidInput(UNKNOWN_JOINT, f'unknown joint {shown(name)}; allowed: '
                                               f'{", ".join(sorted(permitted))}')
     missing = [name for name in required if name not in seen]
     if missing:

@@ -55,6 +55,7 @@ from rosbags.interfaces import Connection
 
 from tiltrov_ros import __version__
 from tiltrov_ros.bag.bagfile import RUN_INFO_KEY, parse_run_info
+from tiltrov_ros.bag.losses import RECORDER_KEY
 from tiltrov_ros.bag.msgdefs import message_class, message_definition
 from tiltrov_ros.bag.qos import matches, subscription_qos, to_bag_qos
 from tiltrov_ros.bag.topics import is_hidden, normalize_type
@@ -62,9 +63,11 @@ from tiltrov_ros.bag.writer import COMPRESSIONS, BagWriter
 from tiltrov_ros.core.errors import BagError, ParameterError, TiltrovError
 from tiltrov_ros.core.names import CLOCK, RECORDER, STACK_TOPICS
 from tiltrov_ros.core.paramtable import Param, ParamTable
-from tiltrov_ros.core.timebase import cdr_stamp_ns
+from tiltrov_ros.core.timebase import cdr_stamp
+from tiltrov_ros.core.validation import InvalidInput, checked_stamp_ns
 
 from .base import TiltrovNode
+from .executors import init
 from .parameters import Overrides, check, declare
 
 VERSION_KEY = 'tiltrov.version'
@@ -190,10 +193,12 @@ class BagRecorder(TiltrovNode):
         self.output = self._bag.path
         self._use_sim_time = bool(self.get_parameter('use_sim_time').value)
         self._clock_ns = 0
+        self._bad_clock = 0         # /clock samples that were not a time
         self._clock_topic: _Topic | None = None
         self._topics: dict[str, _Topic] = {}
         self._skipped: set[str] = set()
         self._errors = 0
+        self._first_error = ''
         self._closed = False
         # bound for draining a whole queue (a queue never holds more than its depth)
         self._queue_limit = self.config.queue_depth or 1_000_000
@@ -302,9 +307,14 @@ class BagRecorder(TiltrovNode):
             self._record(topic, data, info)
             self._drain(topic, limit=_DRAIN_LIMIT)
         except Exception as exc:
-            self._errors += 1
-            self.get_logger().error(f'cannot record a message of {topic.name}: {exc}',
-                                    throttle_duration_sec=_THROTTLE)
+            self._write_error(f'cannot record a message of {topic.name}: {exc}')
+
+    def _write_error(self, text: str) -> None:
+        """Count and log (throttled) a message or chunk that could not be written."""
+        self._errors += 1
+        self._first_error = self._first_error or text
+        self.get_logger().error(f'{text} ({self._errors} error(s) so far)',
+                                throttle_duration_sec=_THROTTLE)
 
     def _drain(self, topic: _Topic, limit: int) -> None:
         """Take and record messages already queued on ``topic``'s subscription."""
@@ -326,7 +336,7 @@ class BagRecorder(TiltrovNode):
             return
         topic.received += 1
         if topic is self._clock_topic:
-            self._clock_ns = cdr_stamp_ns(data)
+            self._take_clock(data)
             log_time = self._clock_ns
         elif self._clock_topic is not None:
             self._drain(self._clock_topic, limit=_DRAIN_LIMIT)  # /clock before later data
@@ -339,6 +349,19 @@ class BagRecorder(TiltrovNode):
             topic.connection = self._add_connection(topic)
         if self._bag.write(topic.connection, log_time, data):
             self._log_flushed()
+
+    def _take_clock(self, data: bytes) -> None:
+        """Log time from a /clock sample: a malformed one (no stamp, ``sec < 0``,
+        ``nanosec >= 1e9``) is recorded as it came but leaves the log time at the
+        last good sample (counted, logged); a sample earlier than the last moves
+        the log time back with it (time starts over: nodes/simclock.py)."""
+        try:
+            self._clock_ns = checked_stamp_ns(*cdr_stamp(data))
+        except (InvalidInput, ValueError) as exc:
+            self._bad_clock += 1
+            self.get_logger().warning(
+                f'/clock sample not a time ({exc}; {self._bad_clock} so far): logged at the '
+                'last good one', throttle_duration_sec=_THROTTLE)
 
     def _add_connection(self, topic: _Topic) -> Connection:
         """The topic's bag connection, with its publishers' QoS (from the graph now,
@@ -364,9 +387,7 @@ class BagRecorder(TiltrovNode):
             if not self._closed and self._bag.flush():
                 self._log_flushed()
         except Exception as exc:
-            self._errors += 1
-            self.get_logger().error(f'cannot flush {self.output}: {exc}',
-                                    throttle_duration_sec=_THROTTLE)
+            self._write_error(f'cannot flush {self.output}: {exc}')
 
     def _log_flushed(self) -> None:
         flushed = self._bag.flushed_counts
@@ -427,7 +448,14 @@ class BagRecorder(TiltrovNode):
                     self.destroy_subscription(sub)
                 except Exception as exc:
                     self.get_logger().debug(f'destroying the {topic.name} subscription: {exc}')
-        self._bag.close()
+        try:
+            self._bag.set_custom_data(RECORDER_KEY, json.dumps(self._account(), sort_keys=True))
+        except Exception as exc:  # a full disk: the bag says nothing, the exit code does
+            self._write_error(f'cannot write the metadata of {self.output}: {exc}')
+        try:
+            self._bag.close()
+        except Exception as exc:
+            self._write_error(f'cannot close {self.output}: {exc}')
         stats = self.stats()
         lines = [f'recorded {stats.total} messages on {len(stats.written)} topics '
                  f'into {self.output}']
@@ -437,6 +465,23 @@ class BagRecorder(TiltrovNode):
             self._stats_logger.warning(f'lost in DDS: {stats.lost}; write errors: '
                                        f'{stats.errors}')
         return stats
+
+    def _account(self) -> dict[str, Any]:
+        """What the recorder itself knows it lost (``tiltrov.recorder`` in the bag)."""
+        stats = self.stats()
+        return {'write_errors': stats.errors, 'first_error': self._first_error,
+                'lost_in_dds': stats.lost, 'bad_clock_samples': self._bad_clock}
+
+    @property
+    def first_error(self) -> str:
+        """The first write error, as logged ('' if none)."""
+        return self._first_error
+
+    @property
+    def lost_data(self) -> bool:
+        """True when a message could not be written or DDS reported samples lost."""
+        stats = self.stats()
+        return bool(stats.errors or stats.lost)
 
     def destroy_node(self) -> None:
         try:
@@ -482,7 +527,8 @@ def main(args: list[str] | None = None) -> int:
     # ends cleanly) and chain to the previous handler: for SIGINT, Python's,
     # which would raise KeyboardInterrupt anywhere, even inside a bag write.
     signal.signal(signal.SIGINT, lambda signum, frame: None)
-    rclpy.init(args=args)
+    if not init(args, RECORDER):
+        return 1
     # Created now, while the context is valid: a signal may come during start-up.
     executor = SingleThreadedExecutor()
     node: BagRecorder | None = None
@@ -503,6 +549,12 @@ def main(args: list[str] | None = None) -> int:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+    if node is not None and node.lost_data:
+        stats = node.stats()
+        print(f'bag_recorder: data lost in {node.output}: {stats.errors} message(s) not '
+              f'written{f" ({node.first_error})" if stats.errors else ""}; DDS lost: '
+              f'{stats.lost or "none"}', file=sys.stderr, flush=True)
+        return 1
     return 0
 
 

@@ -15,6 +15,7 @@ from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
 from rclpy.context import Context
+from rclpy.duration import Duration
 from rclpy.exceptions import (
     InvalidParameterTypeException,
     InvalidParameterValueException,
@@ -22,13 +23,15 @@ from rclpy.exceptions import (
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
+from rclpy.serialization import deserialize_message
+from rclpy.subscription import Subscription
 
 from tiltrov_ros.core import validation
 from tiltrov_ros.core.errors import ParameterError
-from tiltrov_ros.core.names import DIAGNOSTICS
+from tiltrov_ros.core.names import CLOCK, DIAGNOSTICS, FINAL_STATUS_KEY
 from tiltrov_ros.core.paramtable import Param, ParamTable
 from tiltrov_ros.core.timebase import NS_PER_S
-from tiltrov_ros.core.validation import InvalidInput, StampBounds
+from tiltrov_ros.core.validation import MALFORMED, InvalidInput, StampBounds
 
 from .conversions import message_is_finite, set_stamp
 from .parameters import (
@@ -42,6 +45,7 @@ from .parameters import (
     parameter_source,
 )
 from .qos import RELIABLE_QOS
+from .simclock import install as install_time_source
 
 #: s: repeated warnings from callbacks are throttled to one per this period.
 THROTTLE = 5.0
@@ -51,6 +55,14 @@ DIAGNOSTICS_PERIOD = 1.0
 #: how long it waits at most before it publishes anyway (``wait_for_recorder``).
 RECORDER_POLL = 0.02
 RECORDER_WAIT = 10.0
+#: s (wall): how long a node that stops waits at most for its readers to acknowledge
+#: its last messages (below the launcher's SIGINT timeout, stack/supervisor.py). A
+#: reader that fell behind (the recorder on a loaded machine) asks for what it missed
+#: when the writer's next heartbeat comes, up to 3 s later (Fast DDS): a few of those.
+DELIVERY_WAIT = 10.0
+#: Characters of a rejection's detail in a log line (the strings of a message inside it
+#: are already cut by core/validation.shown): a log line stays bounded.
+MAX_DETAIL = 300
 #: DiagnosticStatus levels as ints (the message field is a byte).
 OK, WARN, ERROR = 0, 1, 2
 
@@ -98,9 +110,9 @@ def guarded(method: F) -> F:
     """
 
     @functools.wraps(method)
-    def wrapper(self: TiltrovNode, *args: Any) -> Any:
+    def wrapper(self: TiltrovNode, *args: Any, **kwargs: Any) -> Any:
         try:
-            return method(self, *args)
+            return method(self, *args, **kwargs)
         except Exception as exc:  # the executor must survive anything a callback does
             _callback_failed(self, method.__name__, exc)
             return None
@@ -198,6 +210,9 @@ class TiltrovNode(Node):
     #: The stack's nodes publish /diagnostics and may hold their outputs for the
     #: recorder (:data:`RECORDER_HOLD`); the recorder itself does neither.
     stack_node: ClassVar[bool] = True
+    #: The node subscribes to /clock itself and rejects bad samples there (the time
+    #: source then drops them without counting them a second time).
+    reads_clock: ClassVar[bool] = False
 
     def __init__(self, node_name: str, *, namespace: str | None = None,
                  context: Context | None = None, cli_args: Sequence[str] | None = None,
@@ -227,6 +242,14 @@ class TiltrovNode(Node):
         self._reject_log: dict[tuple[str, str], tuple[int, int]] = {}
         self._rejected_at_last_report = 0
         self._safe_publishers: list[SafePublisher] = []
+        #: Topics that must have one source (the plant's); more are named on /diagnostics.
+        self.single_source: list[str] = []
+        self._sources_reported: dict[str, tuple[str, ...]] = {}
+        #: rclpy's time source with each /clock sample checked (nodes/simclock.py).
+        self.time_source = install_time_source(self)
+        if self.stack_node and self.on_sim_time():
+            self.expect_single_source(CLOCK)
+        self.add_on_set_parameters_callback(self._refuse_fixed)
         # Lockstep with a recorder (the launcher sets it with --record): hold this
         # node's outputs, in order, until the recorder reads every one of its topics.
         # The stack's writers are VOLATILE, so what goes out before the recorder has
@@ -277,7 +300,19 @@ class TiltrovNode(Node):
     def on_rejected(self, topic: str, bad: InvalidInput, stamp: int | None) -> None:
         """Called after a message of ``topic`` was rejected; ``stamp`` is its stamp (ns)
         when the stamp itself was valid, else None. Subclasses answer a rejected
-        tick with their safe command here."""
+        tick with their safe command here, stamped by :meth:`safe_stamp`, and change
+        nothing else (no state, no cached answer)."""
+
+    def safe_stamp(self, stamp: int, newest_valid: int | None, period: int) -> int:
+        """The stamp of the safe answer to a rejected message stamped ``stamp``: never
+        later than the node's own last good time, so that a rejected message cannot
+        push a stamp ahead of the real ones (downstream nodes keep the latest command
+        by stamp). That time is the node's clock (sim time); while it is unknown, the
+        newest valid input's stamp ``newest_valid`` plus one control ``period``."""
+        now = self.clock_ns()
+        if now is None and newest_valid is not None:
+            now = newest_valid + period
+        return stamp if now is None else min(stamp, now)
 
     # -- input validation -------------------------------------------------------
 
@@ -347,6 +382,40 @@ class TiltrovNode(Node):
             validation.check_frame(header.frame_id, frame)
         return ns
 
+    def create_input_subscription(self, msg_type: Any, topic: str,
+                                  callback: Callable[[Any], Any], qos: QoSProfile
+                                  ) -> Subscription:
+        """A subscription of ``topic`` that decodes what it receives itself (a raw
+        subscription and :meth:`decode`): bytes that do not decode as ``msg_type``
+        are rejected as ``malformed`` (rclpy's typed subscriptions drop them without
+        a trace); a message that decodes goes to ``callback``, an
+        :func:`input_callback`."""
+
+        def on_bytes(data: bytes) -> None:
+            msg = self.decode(msg_type, topic, data)
+            if msg is not None:
+                callback(msg)
+
+        return self.create_subscription(msg_type, topic, on_bytes, qos, raw=True)
+
+    def decode(self, msg_type: Any, topic: str, data: bytes) -> Any | None:
+        """``data`` (serialized CDR) as a ``msg_type`` message, or None when it does not
+        decode (truncated, garbage): then rejected as ``malformed`` (counted, logged)."""
+        try:
+            return deserialize_message(data, msg_type)
+        except Exception:   # rclpy raises RMWError (Fast CDR: not enough bytes, ...)
+            self.reject_malformed(topic, msg_type, data)
+            return None
+
+    def reject_malformed(self, topic: str, msg_type: Any, data: bytes) -> None:
+        """Reject ``data`` received on ``topic``: not a serialized ``msg_type``."""
+        try:
+            name = f'{msg_type.__module__.split(".")[0]}/msg/{msg_type.__name__}'
+            self.reject_input(topic, InvalidInput(
+                MALFORMED, f'{len(data)} bytes that do not decode as {name}'))
+        except Exception as exc:  # the executor must survive anything a sample holds
+            _callback_failed(self, 'reject_malformed', exc)
+
     def reject_input(self, topic: str, bad: InvalidInput, stamp: int | None = None) -> None:
         """Count a rejected message of ``topic``, log it (at most once per THROTTLE
         seconds per topic and reason, with the number left unlogged), and call
@@ -357,8 +426,10 @@ class TiltrovNode(Node):
         last, quiet = self._reject_log.get(key, (None, 0))
         if last is None or now - last >= THROTTLE * NS_PER_S:
             more = f' ({quiet} more since the last report)' if quiet else ''
+            detail = bad.detail if len(bad.detail) <= MAX_DETAIL else (
+                f'{bad.detail[:MAX_DETAIL]}... (cut)')
             self.get_logger().warning(f'rejected a {topic} message ({bad.reason}): '
-                                      f'{bad.detail}{more}')
+                                      f'{detail}{more}')
             self._reject_log[key] = (now, 0)
         else:
             self._reject_log[key] = (last, quiet + 1)
@@ -425,6 +496,22 @@ class TiltrovNode(Node):
                                 f'({self.unsafe[topic]} so far); publishing the safe command',
                                 throttle_duration_sec=THROTTLE)
 
+    def wait_for_delivery(self, timeout: float = DELIVERY_WAIT) -> bool:
+        """Wait (at most ``timeout`` wall seconds in all) until every reliable reader has
+        acknowledged every message this node published (its guarded publishers and
+        /diagnostics). Called before the node's writers are destroyed: a writer's
+        unacknowledged samples go with it, so a reader that lags (the bag recorder on
+        a loaded machine) would lose the last ones."""
+        deadline = time.monotonic() + timeout
+        acked = True
+        publishers = [p.publisher for p in self._safe_publishers]
+        if self._diagnostics_pub is not None:
+            publishers.append(self._diagnostics_pub)
+        for pub in publishers:
+            left = max(deadline - time.monotonic(), 0.0)
+            acked = bool(pub.wait_for_all_acked(Duration(seconds=left))) and acked
+        return acked
+
     def published_counts(self) -> dict[str, int]:
         """Messages published per topic by the guarded publishers."""
         return {pub.topic: pub.published for pub in self._safe_publishers}
@@ -438,9 +525,37 @@ class TiltrovNode(Node):
     def steady_ns(self) -> int:
         return int(self.steady.now().nanoseconds)
 
+    def expect_single_source(self, *topics: str) -> None:
+        """``topics`` must have one publisher (the plant's odom, joint_states, /clock):
+        a second one (another simulator, a replay) is named on /diagnostics (WARN)
+        and logged once when it appears."""
+        self.single_source.extend(self.resolve_topic_name(t) for t in topics)
+
+    def extra_sources(self) -> dict[str, tuple[str, ...]]:
+        """Topic -> its publishers (node names), for the single-source topics with more
+        than one."""
+        found: dict[str, tuple[str, ...]] = {}
+        for topic in self.single_source:
+            names = tuple(sorted({f'{i.node_namespace.rstrip("/")}/{i.node_name}'
+                                  for i in self.get_publishers_info_by_topic(topic)}))
+            if len(names) > 1:
+                found[topic] = names
+            if names != self._sources_reported.get(topic, names[:1]) and len(names) > 1:
+                self.get_logger().warning(f'{len(names)} publishers of {topic}: '
+                                          f'{", ".join(names)}; one is expected')
+            self._sources_reported[topic] = names
+        return found
+
     @guarded
-    def publish_diagnostics(self) -> None:
+    def publish_diagnostics(self, final: bool = False) -> None:
+        """Publish this node's status; ``final``: the last one, sent as the node stops
+        (``final: true``): a recording of the whole run that lacks it may have lost the
+        node's last messages (bag/losses.py)."""
         level, message, values = self.diagnostic_status()
+        for topic, names in self.extra_sources().items():
+            level = max(level, WARN)
+            message = f'{message}; {len(names)} publishers of {topic}: {", ".join(names)}'
+            values = {**values, f'publishers.{topic}': list(names)}
         rejected = self.rejected_messages
         if rejected > self._rejected_at_last_report:
             level = max(level, WARN)
@@ -456,10 +571,14 @@ class TiltrovNode(Node):
             message = f'{message}; {unsafe} non-finite output(s) withheld'
         values = {**values, 'callback_errors': self.callback_errors,
                   'rejected_messages': rejected}
+        if self.on_sim_time():
+            values['clock_jumps_back'] = self.time_source.jumps_back
         values.update({f'rejected.{topic}.{reason}': n
                        for (topic, reason), n in sorted(self.rejections.items())})
         values.update({f'unsafe_outputs.{topic}': n for topic, n in sorted(self.unsafe.items())})
         values.update({f'published.{topic}': n for topic, n in self.published_counts().items()})
+        if final:
+            values[FINAL_STATUS_KEY] = 'true'
         status = DiagnosticStatus(
             level=bytes([level]), name=f'{self.get_fully_qualified_name()}',
             message=message, hardware_id='tiltrov',
@@ -480,6 +599,18 @@ class TiltrovNode(Node):
         unknown = sorted(name for name in given if not self.has_parameter(name))
         if unknown:
             self.get_logger().warning(f'ignoring unknown parameter(s): {", ".join(unknown)}')
+
+    def _refuse_fixed(self, parameters: list[Parameter]) -> SetParametersResult:
+        """A run-time change no node of the package applies, refused with the reason:
+        ``use_sim_time`` (each node chose its time source, subscriptions and timers at
+        start). Deleting a parameter (``ros2 param delete``) rclpy refuses itself:
+        every parameter is declared with a value of a fixed type."""
+        for p in parameters:
+            if p.name == 'use_sim_time' and self.has_parameter('use_sim_time') and (
+                    p.value != self.get_parameter('use_sim_time').value):
+                return self.reject('use_sim_time is fixed at start (restart the node to '
+                                   'change it)')
+        return SetParametersResult(successful=True)
 
     def reject(self, reason: str) -> SetParametersResult:
         self.get_logger().warning(f'parameter change rejected: {reason}')

@@ -236,11 +236,14 @@ class RobotMarkers:
         self.publisher.publish(self._bytes.serialize(sample.t_ns, scene))
 
     def _update_wrenches(self) -> None:
-        """Decode the latest wrenches; a bad one is rejected (counted on /diagnostics)
-        and the one before it stays."""
+        """Decode the latest wrenches; a bad one (bytes that do not decode, a value
+        not finite) is rejected (counted on /diagnostics) and the one before it stays."""
         latest, self._latest = self._latest, {}
         for topic, data in latest.items():
-            wrench = wrench_array(deserialize_message(data, WrenchStamped))
+            msg = self.node.decode(WrenchStamped, topic, data)
+            if msg is None:
+                continue
+            wrench = wrench_array(msg)
             try:
                 check_finite(wrench, 'wrench')
             except InvalidInput as bad:

@@ -20,16 +20,25 @@ Modes (parameter ``mode``):
   t_i, which it applies before stepping (zero-order hold until the next
   tick), exactly as :func:`tiltrov_ros.core.runner.run` does. Before the
   initial state it waits until ``startup_subscribers`` readers are matched on
-  ``odom`` and both command topics have a publisher, then ``startup_delay``
+  ``odom`` and a publisher on each command topic, then ``startup_delay``
   wall seconds more. If the commands of a tick
   have not come after ``stall_timeout`` wall seconds, the wait is reported on
   ``/diagnostics`` as a stall and the state at t_i (joint_states, odom, clock)
   is published again, so a lost message or a restarted controller resumes the
-  run; every node of the stack answers a repeated stamp idempotently.
+  run; every node of the stack answers a repeated stamp idempotently. The
+  initial state is published again only for a reader matched after it went
+  out (a late reader cannot have it): the first answer may be slow (a node
+  holds its outputs until the bag recorder reads them, up to
+  ``RECORDER_WAIT``), and a state published twice is recorded twice. Only a
+  start-up longer than ``RECORDER_WAIT`` + ``stall_timeout`` is a stall.
 * ``realtime``: a wall-clock timer steps the plant ``real_time_factor`` times
   faster than real time; the latest command (by stamp) is in force. Time
   starts once ``startup_subscribers`` readers are matched on ``odom`` (0: at
   once), so a controller started with the plant is there from t = 0.
+
+In both modes a command stamped more than one plant step after the plant's
+time is rejected (``future_stamp``): it answers no state yet published, and,
+latest by stamp, it would shut out the real answers until its time.
 
 With ``duration`` > 0 the plant stops at that sim time (after publishing the
 state at ``duration``) and :attr:`PlantSimulator.finished` completes; with
@@ -46,7 +55,6 @@ from typing import Any
 
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.duration import Duration
 from rclpy.parameter import Parameter
 from rclpy.task import Future
 from rosgraph_msgs.msg import Clock as ClockMsg
@@ -67,11 +75,12 @@ from tiltrov_ros.core.scenarios import failed_at
 from tiltrov_ros.core.timebase import format_ns, seconds, to_ns
 from tiltrov_ros.core.validation import (
     InvalidInput,
+    check_answerable,
     checked_stamp_ns,
     failed_thruster_indices,
 )
 
-from .base import OK, THROTTLE, WARN, TiltrovNode, guarded, input_callback
+from .base import OK, RECORDER_WAIT, THROTTLE, WARN, TiltrovNode, guarded, input_callback
 from .conversions import (
     fill_joint_state,
     fill_odometry,
@@ -91,12 +100,11 @@ from .qos import PUBLISHER_QOS, RELIABLE_QOS
 NO_VALUE = 0.0
 #: s (wall): how often the lockstep watchdog looks at the start-up and stall state.
 WATCHDOG_PERIOD = 0.05
-#: s (wall): re-publication period of the initial state until the first commands come.
+#: s (wall): how often the plant looks for readers matched after the initial state went
+#: out, until the first commands come (such a reader gets the initial state again).
 STARTUP_RETRY = 0.25
 #: Most plant steps one realtime timer callback catches up before it re-bases.
 MAX_CATCH_UP = 100
-#: s (wall): at the end of the run, the longest wait for the readers' acknowledgements.
-DELIVERY_TIMEOUT = 5.0
 #: lockstep: most ticks with commands held before their time (only the present one is
 #: legitimate; the cap keeps a misbehaving publisher from growing the table).
 MAX_PENDING = 100
@@ -122,14 +130,20 @@ class PlantSimulator(TiltrovNode):
         self._odom_pub = self.create_safe_publisher(Odometry, ODOM, PUBLISHER_QOS)
         self._joint_pub = self.create_safe_publisher(JointState, JOINT_STATES, PUBLISHER_QOS)
         self._clock_pub = self.create_safe_publisher(ClockMsg, CLOCK, PUBLISHER_QOS)
+        self.expect_single_source(ODOM, JOINT_STATES, CLOCK)
         c = self.config
         self.markers = (RobotMarkers(self, c.robot.length, c.robot.width, c.markers_period_ns,
                                      c.marker_scales) if c.markers_period_ns else None)
         self._odom_msg = new_odometry()
         self._joint_msg = new_joint_state(TILTS + THRUSTERS)
         self._clock_msg = ClockMsg()
-        self.create_subscription(JointState, THRUST_CMD, self._on_thrust_cmd, RELIABLE_QOS)
-        self.create_subscription(JointState, TILT_CMD, self._on_tilt_cmd, RELIABLE_QOS)
+        self._command_subs = (
+            self.create_input_subscription(JointState, THRUST_CMD, self._on_thrust_cmd,
+                                           RELIABLE_QOS),
+            self.create_input_subscription(JointState, TILT_CMD, self._on_tilt_cmd,
+                                           RELIABLE_QOS))
+        #: readers matched on odom, joint_states, /clock when the initial state went out
+        self._initial_readers: tuple[int, ...] = ()
 
         # lockstep: tick ns -> [thrusts, tilts] (None: not yet; _REJECTED: bad message)
         self._pending: dict[int, list[list[float] | None]] = {}
@@ -223,6 +237,7 @@ class PlantSimulator(TiltrovNode):
                               or self.finished.done()):
             return   # a re-published answer to a tick already passed
         ns = self.check_header(msg.header, None)
+        check_answerable(ns, self.plant.time_ns, self.config.step_ns)
         values = joint_state_values(msg, names, field)
         if not self.lockstep:
             if ns >= self._last_applied[kind]:
@@ -247,10 +262,17 @@ class PlantSimulator(TiltrovNode):
         self._advance()
 
     def on_rejected(self, topic: str, bad: InvalidInput, stamp: int | None) -> None:
-        """A rejected command leaves the previous one in force. In lockstep one with a
-        valid stamp still answers its tick (the run goes on); a bad stamp answers none."""
-        if self.lockstep and stamp is not None and not self.finished.done():
-            self._hold(stamp, 0 if topic == THRUST_CMD else 1, _REJECTED)
+        """A rejected command leaves the previous one in force. In lockstep one stamped
+        with the tick the plant waits at answers that tick, unless a valid one already
+        did (the run goes on); one stamped ahead answers nothing, so that it cannot
+        stand in for a valid command not yet arrived; a bad stamp answers none."""
+        if (not self.lockstep or stamp is None or self.finished.done()
+                or stamp != self.plant.time_ns):
+            return
+        kind = 0 if topic == THRUST_CMD else 1
+        entry = self._pending.get(stamp)
+        if entry is None or entry[kind] is None:
+            self._hold(stamp, kind, _REJECTED)
 
     def _command(self, kind: int, values: list[float]) -> None:
         if kind == 0:
@@ -335,6 +357,7 @@ class PlantSimulator(TiltrovNode):
                 return
             self._started = True
             self._started_at = now
+            self._initial_readers = self._state_readers()
             self._publish_state()
             self._advance()
             return
@@ -344,11 +367,17 @@ class PlantSimulator(TiltrovNode):
         waited = seconds(self.steady_ns() - since)
         t = self.plant.time_ns
         if not self._commands_seen:
-            # Start-up: a reader matched late may have missed the initial state.
-            if waited >= STARTUP_RETRY:
+            # Start-up: only a reader matched after the initial state went out misses it.
+            # The others have it (reliable) and may answer late: a node holds its outputs
+            # until the recorder reads them (RECORDER_WAIT at most).
+            readers = self._state_readers()
+            if waited >= STARTUP_RETRY and any(
+                    n > n0 for n, n0 in zip(readers, self._initial_readers)):
                 self.startup_retries += 1
+                self._initial_readers = readers
                 self._republish()
-            return
+            if waited < RECORDER_WAIT + self.config.stall_timeout:
+                return
         if waited >= self.config.stall_timeout:
             self.stalls += 1
             self._stalled = True
@@ -366,11 +395,17 @@ class PlantSimulator(TiltrovNode):
         self._publish_state()
 
     def _peers_ready(self) -> bool:
-        """lockstep: the odom readers and both command publishers; realtime: the readers."""
+        """lockstep: the odom readers and both command publishers matched; realtime: the
+        readers."""
         if self._odom_pub.get_subscription_count() < self.config.startup_subscribers:
             return False
-        return not self.lockstep or (self.count_publishers(THRUST_CMD) > 0
-                                     and self.count_publishers(TILT_CMD) > 0)
+        return not self.lockstep or all(sub.get_publisher_count() > 0
+                                        for sub in self._command_subs)
+
+    def _state_readers(self) -> tuple[int, ...]:
+        """Readers matched on each writer of the state (odom, joint_states, /clock)."""
+        return tuple(pub.get_subscription_count()
+                     for pub in (self._odom_pub, self._joint_pub, self._clock_pub))
 
     # -- realtime --------------------------------------------------------------------
 
@@ -470,26 +505,6 @@ class PlantSimulator(TiltrovNode):
             'failed_thrusters': [i + 1 for i in plant.failed_thrusters],
         }
 
-    def wait_for_delivery(self, timeout: float = DELIVERY_TIMEOUT) -> bool:
-        """Wait (at most ``timeout`` s in all) until every reliable reader acknowledged
-        the last messages (end of run), so that none is lost with this process.
-
-        Usually immediate. A sample a busy reader (a recorder on a loaded machine)
-        dropped from its queue is sent again only when the reader asks for it, after
-        the writer's next heartbeat (seconds with Fast DDS's defaults), hence the
-        bound; a reader that never acknowledges is reported.
-        """
-        deadline = self.steady_ns() + to_ns(timeout)
-        acked = True
-        for pub in (self._joint_pub, self._odom_pub, self._clock_pub):
-            left = max(deadline - self.steady_ns(), 0)
-            acked = pub.wait_for_all_acked(Duration(nanoseconds=left)) and acked
-        if not acked:
-            self.get_logger().warning(
-                f'a reader did not acknowledge the last odom/joint_states/clock within '
-                f'{timeout:g} s: it may miss them')
-        return acked
-
 
 def main(args: list[str] | None = None) -> int:
     """``plant_simulator [--ros-args --params-file config/plant_simulator.yaml ...]``."""
@@ -497,11 +512,7 @@ def main(args: list[str] | None = None) -> int:
     def until(node: Any) -> Future | None:
         return node.finished if node.config.exit_at_end else None
 
-    def before_exit(node: Any) -> None:
-        node.publish_diagnostics()      # the final counts, for recorders and tiltrov soak
-        node.wait_for_delivery()
-
-    return main_loop(PlantSimulator, args, PLANT, until=until, before_exit=before_exit)
+    return main_loop(PlantSimulator, args, PLANT, until=until)
 
 
 if __name__ == '__main__':

@@ -63,6 +63,8 @@ HOLD_ORIGIN = ReferenceProfile(((),) * 6)
 class ReferencePublisher(TiltrovNode):
     """Publishes the reference at every control tick (see the module docstring)."""
 
+    reads_clock = True      # its own /clock reader rejects and counts bad samples
+
     def __init__(self, *, node_name: str = REFERENCE, namespace: str | None = None,
                  context: Any = None, cli_args: Sequence[str] | None = None,
                  parameter_overrides: Overrides = None) -> None:
@@ -101,7 +103,7 @@ class ReferencePublisher(TiltrovNode):
         self.skipped = 0
         self.restarts = 0
         if self.sim_time:
-            self.create_subscription(ClockMsg, CLOCK, self._on_clock, CLOCK_READER_QOS)
+            self.create_input_subscription(ClockMsg, CLOCK, self._on_clock, CLOCK_READER_QOS)
         else:
             self._start_ns = self.get_clock().now().nanoseconds
             self.create_timer(seconds(self.period_ns), self._on_timer)

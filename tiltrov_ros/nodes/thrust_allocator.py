@@ -11,10 +11,16 @@ solve for the thrusts (``allocate_fixed``). Parameter ``tilt_request``:
 
 * ``required``: every wrench waits for the tilt request with its stamp (they
   travel on two topics, so either may come first); after ``input_timeout``
-  wall seconds the latest request received is used (counted on /diagnostics);
+  wall seconds the latest request received is used (counted on /diagnostics).
+  The wait is measured from the oldest wrench not answered: a newer wrench
+  replaces the waiting one (realtime) but does not restart the wait;
 * ``ignored``: free allocation, the topic is not subscribed;
-* ``auto`` (default): ``required`` once a tilt request has been received or
-  a ``tilt_request`` publisher is in the graph, else free allocation.
+* ``auto`` (default): free allocation until a tilt request carries the stamp
+  of a wrench (the switching controller's do); from then on ``required``,
+  until a wrench waits ``input_timeout`` in vain, which returns to free
+  allocation. A request that matches no wrench (a stray publisher, another
+  run's replay) changes nothing; /diagnostics counts the requests received
+  and matched and names the topic's publishers.
 
 The launcher sets ``required`` for the switching controller and ``ignored``
 otherwise. A repeated wrench stamp re-publishes the cached answer without
@@ -112,8 +118,9 @@ ALLOCATION = ParamTable('allocation', [
 #: bounds and the robot).
 ALLOCATOR_PARAMS = ParamTable('thrust_allocator', [
     Param('tilt_request', 'str', 'auto', 'tilts fixed by the controller (switching baseline): '
-          'required, ignored, or auto (required once a tilt_request publisher or message is '
-          'seen)', choices=TILT_REQUEST_MODES, read_only=True),
+          'required, ignored, or auto (paired once a request carries a wrench_cmd stamp, free '
+          'again after a wrench waited input_timeout in vain)', choices=TILT_REQUEST_MODES,
+          read_only=True),
     Param('input_timeout', 'float', 1.0, 'wall seconds a wrench waits for its tilt_request '
           'before the latest one is used', 's', low=0.001, high=3600.0),
     Param('wrench_timeout', 'float', 0.5, 'zero thrust (tilts held) is published every '
@@ -168,10 +175,10 @@ class ThrustAllocatorNode(TiltrovNode):
         self._thrust_pub = self.create_safe_publisher(
             JointState, THRUST_CMD, PUBLISHER_QOS,
             lambda msg: self._safe_msgs(stamp_ns(msg.header.stamp))[2])
-        self.create_subscription(WrenchStamped, WRENCH_CMD, self._on_wrench, RELIABLE_QOS)
+        self.create_input_subscription(WrenchStamped, WRENCH_CMD, self._on_wrench, RELIABLE_QOS)
         if self.tilt_request_mode != 'ignored':
-            self.create_subscription(JointState, TILT_REQUEST, self._on_tilt_request,
-                                     RELIABLE_QOS)
+            self.create_input_subscription(JointState, TILT_REQUEST, self._on_tilt_request,
+                                           RELIABLE_QOS)
             self.create_timer(WATCHDOG_PERIOD, self._watchdog, clock=self.steady)
         #: tilt_source measured: joint_states tilts by stamp; the last received; wrenches
         #: that started from an earlier measurement than their own stamp, or from none.
@@ -179,14 +186,18 @@ class ThrustAllocatorNode(TiltrovNode):
         self._latest_measured: tuple[int, tuple[float, float]] | None = None
         self.measured_late = 0
         if self.measured_tilts:
-            self.create_subscription(JointState, JOINT_STATES, self._on_joint_states,
-                                     RELIABLE_QOS)
+            self.create_input_subscription(JointState, JOINT_STATES, self._on_joint_states,
+                                           RELIABLE_QOS)
 
         self.previous: AllocationResult | None = None
         self._last_ns = -1
         self._last_msgs: tuple[WrenchStamped, JointState, JointState] | None = None
         self._requests: dict[int, tuple[float, float]] = {}
         self._latest_request: tuple[float, float] | None = None
+        #: auto mode: tilt requests have been carrying the wrenches' stamps.
+        self._paired = self.tilt_request_mode == 'required'
+        self.requests_received = 0
+        self.requests_matched = 0
         self._waiting: _Waiting | None = None
         self.ticks = 0
         self.feasible = 0
@@ -266,6 +277,8 @@ class ThrustAllocatorNode(TiltrovNode):
                 self.wrench_timeout = float(p.value)
             elif p.name == 'wrench_tolerance':
                 self.tolerances = shortfall_tolerances(self.robot, float(p.value))
+            elif p.name == 'input_timeout':
+                self.input_timeout = float(p.value)
             elif p.name == 'failed_thrusters':
                 self.failed_param = failed_thruster_indices(p.value)
                 self._use_failed(self._wanted_failed(self._last_ns if self._last_ns >= 0
@@ -302,14 +315,21 @@ class ThrustAllocatorNode(TiltrovNode):
     # -- inputs ----------------------------------------------------------------------
 
     def _needs_request(self) -> bool:
-        if self.tilt_request_mode == 'auto':
-            return (self._latest_request is not None
-                    or self.count_publishers(TILT_REQUEST) > 0)
-        return self.tilt_request_mode == 'required'
+        return self.tilt_request_mode != 'ignored' and self._paired
+
+    def _matched(self) -> None:
+        """A tilt request carried a wrench's stamp."""
+        self.requests_matched += 1
+        if not self._paired:
+            self._paired = True
+            self.get_logger().info('tilt_request carries the wrench_cmd stamps: tilts fixed '
+                                   'by the request from now on')
 
     @input_callback(WRENCH_CMD)
     def _on_wrench(self, msg: WrenchStamped) -> None:
         ns = self.check_header(msg.header, FRAME_BODY)
+        wrench = wrench_array(msg)
+        check_finite(wrench, 'wrench')      # before it may act: rejected changes nothing
         if ns == self._last_ns and self._last_msgs is not None:
             self.republished += 1
             self.wrench_watchdog.fresh(ns)
@@ -318,8 +338,6 @@ class ThrustAllocatorNode(TiltrovNode):
         if ns < self._last_ns:
             self._reset(f'wrench_cmd went back from {format_ns(self._last_ns)} to '
                         f'{format_ns(ns)}')
-        wrench = wrench_array(msg)
-        check_finite(wrench, 'wrench')
         self.wrench_watchdog.fresh(ns)
         self._handling = ns
         clipped, changed = clip_wrench(wrench)
@@ -329,14 +347,16 @@ class ThrustAllocatorNode(TiltrovNode):
                 f'wrench_cmd stamped {format_ns(ns)} has components beyond +-{MAX_WRENCH:g}: '
                 'clipped to it', throttle_duration_sec=THROTTLE)
             wrench = np.array(clipped)
-        if self._needs_request():
-            request = self._requests.get(ns)
-            if request is None:
-                if self._waiting is not None:
-                    self.dropped += 1     # a newer wrench came first (realtime)
-                self._waiting = _Waiting(ns, wrench, self.steady_ns())
-                return
+        request = self._requests.get(ns) if self.tilt_request_mode != 'ignored' else None
+        if request is not None:
+            self._matched()
             self._allocate(ns, wrench, request)
+        elif self._needs_request():
+            since = self.steady_ns()
+            if self._waiting is not None:
+                self.dropped += 1     # a newer wrench came first (realtime)
+                since = self._waiting.since     # the wait goes on: it does not restart
+            self._waiting = _Waiting(ns, wrench, since)
         else:
             self._allocate(ns, wrench, None)
 
@@ -345,13 +365,17 @@ class ThrustAllocatorNode(TiltrovNode):
         ns = self.check_header(msg.header, None)
         values = joint_state_values(msg, TILTS, 'position')
         request = (values[0], values[1])
+        self.requests_received += 1
         self._requests[ns] = request
         self._latest_request = request
+        if ns == self._last_ns:     # it came after its wrench was answered (free)
+            self._matched()
         if len(self._requests) > BUFFER:
             for stamp in sorted(self._requests)[:len(self._requests) - BUFFER]:
                 del self._requests[stamp]
         waiting = self._waiting
         if waiting is not None and waiting.ns == ns:
+            self._matched()
             self._allocate(ns, waiting.wrench, request)
 
     @input_callback(JOINT_STATES)
@@ -389,6 +413,14 @@ class ThrustAllocatorNode(TiltrovNode):
         if waited < self.input_timeout:
             return
         self.stale_requests += 1
+        if self.tilt_request_mode == 'auto':
+            self._paired = False
+            self.get_logger().warning(
+                f'no tilt_request stamped {format_ns(waiting.ns)} after {waited:.2f} s: '
+                'free allocation until a request carries a wrench stamp again',
+                throttle_duration_sec=THROTTLE)
+            self._allocate(waiting.ns, waiting.wrench, None)
+            return
         self.get_logger().warning(
             f'no tilt_request stamped {format_ns(waiting.ns)} after {waited:.2f} s: using '
             f'{"the latest" if self._latest_request else "none (free allocation)"}',
@@ -524,12 +556,43 @@ class ThrustAllocatorNode(TiltrovNode):
         self._publish(*self._safe_msgs(self.estimated_now_ns(*seen, to_ns(self.control_period))))
 
     def on_rejected(self, topic: str, bad: InvalidInput, stamp: int | None) -> None:
-        """A rejected wrench with a valid stamp gets the safe answer (the plant waits
-        for that stamp in lockstep); a bad stamp gets none."""
-        if topic == WRENCH_CMD and stamp is not None and stamp != self._last_ns:
-            self._answer_safe(stamp)
+        """A rejected wrench with a valid stamp, later than the last answered and not
+        waiting, gets the safe answer (the plant waits for that stamp in lockstep),
+        stamped no later than the node's clock (:meth:`safe_stamp`) and not kept as the
+        answer of that stamp; nothing else changes. A bad stamp gets none."""
+        waiting = self._waiting
+        if (topic != WRENCH_CMD or stamp is None or stamp <= self._last_ns
+                or (waiting is not None and waiting.ns == stamp)):
+            return
+        seen = self.wrench_watchdog.seen
+        self.safe_answers += 1
+        self._publish(*self._safe_msgs(self.safe_stamp(
+            stamp, seen[0] if seen else None, to_ns(self.control_period))))
 
     # -- diagnostics -----------------------------------------------------------------
+
+    def _tilt_request_status(self) -> tuple[int, str, dict[str, Any]]:
+        """What the tilt requests do: paired with the wrenches or not, who sends them,
+        wrenches that waited in vain or were replaced while waiting."""
+        if self.tilt_request_mode == 'ignored':
+            return OK, '', {}
+        infos = self.get_publishers_info_by_topic(self.resolve_topic_name(TILT_REQUEST))
+        senders = sorted({f'{i.node_namespace.rstrip("/")}/{i.node_name}' for i in infos})
+        level, text = OK, ''
+        unmatched = self.requests_received - self.requests_matched
+        if self.dropped or (self.stale_requests and self._paired):
+            level = WARN
+            text = (f'; wrenches waiting for tilt_request: {self.stale_requests} timed out, '
+                    f'{self.dropped} replaced by newer ones')
+        elif self.requests_received and not self._paired:
+            level = WARN
+            text = (f'; {unmatched} tilt_request(s) from {", ".join(senders) or "(gone)"} '
+                    'carry no wrench_cmd stamp: ignored (free allocation)')
+        return level, text, {
+            'tilt_request_pairing': 'paired' if self._paired else 'free',
+            'tilt_requests_received': self.requests_received,
+            'tilt_requests_matched': self.requests_matched,
+            'tilt_request_publishers': senders}
 
     def diagnostic_status(self) -> tuple[int, str, dict[str, Any]]:
         level = OK
@@ -549,8 +612,11 @@ class ThrustAllocatorNode(TiltrovNode):
             level = WARN
             message = (f'wrench_cmd stale (older than wrench_timeout '
                        f'{self.wrench_timeout:g} s): zero thrust; ' + message)
+        request_level, request_text, request_values = self._tilt_request_status()
+        level = max(level, request_level)
+        message += request_text
         last = self.previous
-        return level, message, {
+        return level, message, {**request_values,
             'mode': self.allocator_config.mode, 'ticks': self.ticks,
             'feasible': self.feasible, 'infeasible': self.infeasible, 'short': self.short,
             'tolerances': [float(v) for v in self.tolerances],

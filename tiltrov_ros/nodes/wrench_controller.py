@@ -35,7 +35,6 @@ from nav_msgs.msg import Odometry
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.parameter import Parameter
-from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 
 from tiltrov_ros.core.controllers import (
@@ -162,13 +161,15 @@ class WrenchController(TiltrovNode):
                                          position=self._safe_tilts))
             if self.kind == 'switching' else None)
         # Raw: only the odometry at control ticks (1 in control_period / step_size) is
-        # deserialized; the stamp of the others is read from the CDR header.
+        # deserialized (bytes that do not decode are rejected: malformed); the stamp of
+        # the others is read from the CDR header.
         self.create_subscription(Odometry, ODOM, self._on_odom_raw, reader_qos(self.mode),
                                  raw=True)
-        self.create_subscription(PoseStamped, SETPOINT, self._on_setpoint, RELIABLE_QOS)
+        self.expect_single_source(ODOM)
+        self.create_input_subscription(PoseStamped, SETPOINT, self._on_setpoint, RELIABLE_QOS)
         if self.use_velocity:
-            self.create_subscription(TwistStamped, SETPOINT_VELOCITY, self._on_velocity,
-                                     RELIABLE_QOS)
+            self.create_input_subscription(TwistStamped, SETPOINT_VELOCITY, self._on_velocity,
+                                           RELIABLE_QOS)
 
         self._setpoints: dict[int, tuple[FloatArray, FloatArray]] = {}
         self._velocities: dict[int, FloatArray] = {}
@@ -249,6 +250,8 @@ class WrenchController(TiltrovNode):
         for p in parameters:
             if p.name == 'odom_timeout':
                 self.odom_timeout = float(p.value)
+            elif p.name == 'input_timeout':
+                self.input_timeout = float(p.value)
         if not any(p.name.startswith(('gains.', 'switching.')) for p in parameters):
             return
         self.controller_config = ControllerConfig.from_mapping(
@@ -261,8 +264,15 @@ class WrenchController(TiltrovNode):
 
     @guarded
     def _on_odom_raw(self, data: bytes) -> None:
-        if cdr_stamp_ns(data) % self.period_ns == 0:
-            self.on_odom(deserialize_message(data, Odometry))
+        try:
+            stamp = cdr_stamp_ns(data)
+        except ValueError:        # too short to hold a stamp
+            self.reject_malformed(ODOM, Odometry, data)
+            return
+        if stamp % self.period_ns == 0:
+            msg = self.decode(Odometry, ODOM, data)
+            if msg is not None:
+                self.on_odom(msg)
 
     @input_callback(ODOM)
     def on_odom(self, msg: Odometry) -> None:
@@ -270,13 +280,7 @@ class WrenchController(TiltrovNode):
         ns = self.check_header(msg.header, self.odom_frames[0])
         if ns % self.period_ns:
             return
-        if ns == self._last_ns and self._last_msgs is not None:
-            self.republished += 1
-            self._publish(*self._last_msgs)
-            return
-        if ns < self._last_ns:
-            self._reset(f'odometry went back from {format_ns(self._last_ns)} to '
-                        f'{format_ns(ns)}')
+        # Validated whole before it may act: a rejected message changes nothing.
         check_frame(msg.child_frame_id, self.odom_frames[1], 'child_frame_id')
         position, quaternion, nu = odometry_arrays(msg)
         check_finite(position, 'position')
@@ -284,6 +288,13 @@ class WrenchController(TiltrovNode):
         check_finite(nu, 'twist')
         if self.enu:            # the core's convention from here on
             position, quaternion, nu = enu_to_ned(position, quaternion, nu)
+        if ns == self._last_ns and self._last_msgs is not None:
+            self.republished += 1
+            self._publish(*self._last_msgs)
+            return
+        if ns < self._last_ns:
+            self._reset(f'odometry went back from {format_ns(self._last_ns)} to '
+                        f'{format_ns(ns)}')
         now = self.steady_ns()
         self.odom_watchdog.fresh(ns, now)
         self._tick = _Tick(ns, position, quaternion, nu, now)
@@ -375,12 +386,24 @@ class WrenchController(TiltrovNode):
         self._answer(ns, ControlOutput(np.zeros(6), self._safe_tilts, 'safe'))
 
     def on_rejected(self, topic: str, bad: InvalidInput, stamp: int | None) -> None:
-        """A rejected odometry tick with a valid stamp is answered with a zero wrench
-        (the state is unknown; the plant waits for that stamp in lockstep)."""
-        if (topic == ODOM and stamp is not None and stamp % self.period_ns == 0
-                and stamp != self._last_ns):
-            self._tick = None
-            self._publish_safe(stamp)
+        """A rejected odometry tick with a valid stamp, later than the last answered and
+        not waiting, is answered with a zero wrench (the state is unknown; the plant waits for that
+        stamp in lockstep), stamped no later than the node's clock (:meth:`safe_stamp`)
+        and not kept as the tick's answer: a valid odometry of the tick afterwards is
+        answered as usual, and nothing else changes."""
+        if (topic != ODOM or stamp is None or stamp % self.period_ns
+                or stamp <= self._last_ns or (self._tick is not None and self._tick.ns == stamp)):
+            return
+        seen = self.odom_watchdog.seen
+        self.safe_answers += 1
+        self._publish_zero(self.safe_stamp(stamp, seen[0] if seen else None, self.period_ns))
+
+    def _publish_zero(self, ns: int) -> None:
+        """A zero wrench (and the last finite tilt request) stamped ``ns``, not kept as
+        the answer of a tick."""
+        self._publish(fill_wrench(new_wrench(), ns, np.zeros(6)),
+                      None if self._tilt_pub is None else fill_joint_state(
+                          new_joint_state(TILTS), ns, position=self._safe_tilts))
 
     @guarded
     def _odom_watchdog(self) -> None:
@@ -390,10 +413,7 @@ class WrenchController(TiltrovNode):
         if seen is None:
             return
         self.watchdog_outputs += 1
-        ns = self.estimated_now_ns(*seen, self.period_ns)
-        self._publish(fill_wrench(new_wrench(), ns, np.zeros(6)),
-                      None if self._tilt_pub is None else fill_joint_state(
-                          new_joint_state(TILTS), ns, position=self._safe_tilts))
+        self._publish_zero(self.estimated_now_ns(*seen, self.period_ns))
 
     def _reset(self, why: str) -> None:
         self.resets += 1

@@ -96,14 +96,18 @@ def run_single_process(specs: Sequence[NodeSpec], namespace: str, out: Output,
                                  for s in specs})
         try:
             spin_until(executor, context, plant.finished)
+            out.line('launch', f'{summary} done in {time.monotonic() - started:.2f} s wall')
+            code = EXIT_OK
         except KeyboardInterrupt:
             out.line('launch', 'SIGINT: stopping every node')
             code = EXIT_INTERRUPTED
-            return code
-        out.line('launch', f'{summary} done in {time.monotonic() - started:.2f} s wall')
-        code = EXIT_OK
-        return code
     finally:
+        # Every node's final counts, and its readers (the recorder, still spinning)
+        # have every message before a writer goes.
+        for node in nodes:
+            if getattr(node, 'stack_node', False):
+                node.publish_diagnostics(final=True)
+                node.wait_for_delivery()
         if executor is not None:
             executor.shutdown()
         if side is not None:
@@ -114,5 +118,10 @@ def run_single_process(specs: Sequence[NodeSpec], namespace: str, out: Output,
         for node in reversed(nodes):
             node.destroy_node()
         rclpy.try_shutdown(context=context)
+        recorder = dict(zip((s.name for s in specs), nodes)).get(RECORDER)
+        if recorder is not None and recorder.lost_data and code == EXIT_OK:
+            out.line('launch', f'the recording lost data: {recorder.stats()}')
+            code = EXIT_FAILED
         status.write('ended', {s.name: {'pid': os.getpid(), 'starts': 1, 'running': False}
                                for s in specs}, code)
+    return code

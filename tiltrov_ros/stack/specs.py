@@ -81,7 +81,12 @@ class NodeSpec:
         values = dict(self.overrides)
         for raw in self.raw_params:
             name, _, value = raw.partition(':=')
-            values[name] = yaml.safe_load(value)
+            try:
+                values[name] = yaml.safe_load(value)
+            except yaml.YAMLError as exc:
+                problem = getattr(exc, 'problem', None) or 'not valid YAML'
+                raise LaunchError(f'--param {self.name}:{raw}: the value is not YAML '
+                                  f'({problem})') from None
         return values
 
     def write_overrides(self, directory: Path, namespace: str = '') -> Path:
@@ -194,6 +199,8 @@ def stack_specs(options: LaunchOptions, *, config_dir: Path | None = None,
     if raw:
         raise LaunchError(f'--param for unknown node(s): {", ".join(sorted(raw))}; nodes: '
                           f'{", ".join(s.name for s in specs)}')
+    for s in specs:
+        s.all_overrides()       # every --param value is YAML, before anything starts
     return specs, config, duration
 
 

@@ -43,8 +43,9 @@ EXIT_FAILED = 1
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
 
-#: s (wall) a node gets to exit after SIGINT, then after SIGTERM, before SIGKILL.
-STOP_TIMEOUTS = (5.0, 3.0)
+#: s (wall) a node gets to exit after SIGINT, then after SIGTERM, before SIGKILL; the
+#: first above the time a stopping node waits for its readers (nodes/base.DELIVERY_WAIT).
+STOP_TIMEOUTS = (13.0, 3.0)
 #: s (wall) the recorder gets to close its bag after SIGINT.
 RECORDER_STOP_TIMEOUT = 20.0
 POLL = 0.05
@@ -276,11 +277,9 @@ def run_processes(specs: Sequence[NodeSpec], namespace: str, out: Output,
             supervisor.report('starting')
         supervisor.report('running')
         code = supervisor.watch(summary, started, linger)
-        return code
     except _Stop as stop:
         out.line('launch', f'{stop.args[0]}: stopping every node')
         code = EXIT_INTERRUPTED
-        return code
     finally:
         stopping.set()              # from here on a signal only hurries the stop
         supervisor.report('stopping')
@@ -293,7 +292,13 @@ def run_processes(specs: Sequence[NodeSpec], namespace: str, out: Output,
             dead = [c.spec.name for c in supervisor.children
                     if c.process.returncode not in (0, None, -signal.SIGINT)]
             print(f'tiltrov launch: failed: {", ".join(dead) or "a node"} died', file=sys.stderr)
+        recorder = next((c for c in supervisor.children if c.spec.name == RECORDER), None)
+        if code == EXIT_OK and recorder is not None and recorder.process.returncode != 0:
+            print(f'tiltrov launch: failed: bag_recorder exit code '
+                  f'{recorder.process.returncode} (it lost data)', file=sys.stderr)
+            code = EXIT_FAILED
         supervisor.report('ended', code)
+    return code
 
 
 def _pids(children: Sequence[_Child]) -> dict[str, int]:
