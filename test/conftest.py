@@ -112,3 +112,11 @@ def ros() -> Iterator[RosHarness]:
 @pytest.fixture
 def repo_root() -> Path:
     return REPO_ROOT
+
+
+@pytest.fixture(scope='session')
+def colcon_workspace(tmp_path_factory: pytest.TempPathFactory) -> Any:
+    """The package colcon-built in a temporary workspace, once per session
+    (:func:`workspace.build_workspace`)."""
+    from workspace import build_workspace
+    return build_workspace(tmp_path_factory.mktemp('ws'))

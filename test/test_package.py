@@ -5,12 +5,10 @@ from __future__ import annotations
 import ast
 import os
 from pathlib import Path
-import shutil
-import subprocess
-import sys
 
 from catkin_pkg.package import parse_package
 import pytest
+from workspace import Workspace, colcon
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -51,24 +49,9 @@ def test_ros_wheels_are_not_install_requires() -> None:
 
 
 @pytest.mark.slow
-def test_colcon_build_installs_what_ros2_run_needs(tmp_path: Path) -> None:
-    colcon = Path(shutil.which('colcon') or Path(sys.executable).with_name('colcon'))
-    assert colcon.exists(), 'colcon-common-extensions is part of the dev install'
-    # Build from a copy of the tracked sources, as a workspace checkout would be.
-    src = tmp_path / 'src' / 'tiltrov_ros'
-    shutil.copytree(REPO, src, ignore=shutil.ignore_patterns(
-        '.venv', '.git', 'build', 'install', 'log', 'runs', '__pycache__', '*.egg-info',
-        '.pytest_cache', '.mypy_cache', '.ruff_cache', '.hypothesis'))
-    env = dict(os.environ, COLCON_HOME=str(tmp_path / 'colcon_home'))
-    result = subprocess.run(
-        [str(colcon), '--log-base', str(tmp_path / 'log'), 'build',
-         '--base-paths', str(tmp_path / 'src'),
-         '--build-base', str(tmp_path / 'build'), '--install-base', str(tmp_path / 'install'),
-         '--event-handlers', 'console_direct-'],
-        cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
-    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
-
-    prefix = tmp_path / 'install' / 'tiltrov_ros'
+def test_colcon_build_installs_what_ros2_run_needs(colcon_workspace: Workspace) -> None:
+    assert colcon().exists(), 'colcon-common-extensions is part of the dev install'
+    prefix = colcon_workspace.prefix
     lib = prefix / 'lib' / 'tiltrov_ros'
     for name in _console_scripts():
         exe = lib / name
@@ -77,7 +60,10 @@ def test_colcon_build_installs_what_ros2_run_needs(tmp_path: Path) -> None:
     share = prefix / 'share'
     assert (share / 'ament_index' / 'resource_index' / 'packages' / 'tiltrov_ros').is_file()
     assert (share / 'tiltrov_ros' / 'package.xml').is_file()
-    shipped = sorted(p.relative_to(REPO / 'config') for p in (REPO / 'config').rglob('*.yaml'))
-    assert shipped, 'config/ ships YAML files'
+    shipped = sorted(p.relative_to(REPO) for pattern in ('*.yaml', '*.json', '*.xml')
+                     for p in (REPO / 'config').rglob(pattern))
+    assert shipped, 'config/ ships parameter files and layouts'
+    shipped += [p.relative_to(REPO) for p in (REPO / 'launch').glob('*.launch.py')]
     for rel in shipped:
-        assert (share / 'tiltrov_ros' / 'config' / rel).is_file(), rel
+        assert (share / 'tiltrov_ros' / rel).is_file(), rel
+    assert (share / 'tiltrov_ros' / 'launch' / 'tiltrov.launch.py').is_file()

@@ -1,0 +1,136 @@
+"""Helpers of the tests with the real ``ros2`` command line (see conftest.py)."""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+from pathlib import Path
+import re
+import shlex
+import signal
+import subprocess
+import sys
+import time
+from typing import Any
+
+from workspace import Workspace
+
+#: What the tests need of the command line: ros2cli's verbs and ros2 launch.
+CLI_MODULES = ('ros2cli', 'ros2run', 'ros2param', 'ros2topic', 'ros2pkg', 'ros2launch',
+               'launch_ros')
+
+
+def missing_cli() -> str | None:
+    """Why the real ros2 command line cannot run here, or None."""
+    absent = [m for m in CLI_MODULES if importlib.util.find_spec(m) is None]
+    if absent:
+        return (f'the ros2 command line is not installed ({", ".join(absent)} not '
+                f'importable): `make ros2-cli` adds it from TILTROV_ROS2_CLI, or run '
+                f'in a ROS 2 Jazzy install')
+    return None
+
+#: ros2 verbs that look at the graph (through the daemon, unless --no-daemon).
+GRAPH_VERBS = ('node', 'param', 'topic', 'service')
+#: ros2 param verbs that wait (--timeout) until the node is discovered.
+NODE_WAITS = ('get', 'set', 'describe', 'dump', 'delete', 'load')
+
+
+class Ros2:
+    """Runs ``ros2 ...`` (and other commands) in the workspace's environment."""
+
+    def __init__(self, workspace: Workspace) -> None:
+        self.workspace = workspace
+        self.env = dict(workspace.env, PYTHONUNBUFFERED='1')
+        exe = Path(sys.executable).with_name('ros2')
+        self.exe = str(exe) if exe.exists() else 'ros2'
+        self.processes: list[subprocess.Popen[str]] = []
+
+    def argv(self, argv: list[str]) -> list[str]:
+        return [self.exe, *argv[1:]] if argv and argv[0] == 'ros2' else argv
+
+    def command(self, args: tuple[str, ...]) -> list[str]:
+        """argv of ``ros2 args...``. The graph verbs run without the daemon (none is
+        left running; discovery by the command itself); ``ros2 param`` waits up to 20 s
+        for the node (discovery without multicast can take a few seconds)."""
+        if args[:1] and args[0] in GRAPH_VERBS and '--no-daemon' not in args:
+            args = (*args[:2], '--no-daemon', *args[2:])
+        if args[:1] == ('param',) and args[1] in NODE_WAITS and '--timeout' not in args:
+            args = (*args[:2], '--timeout', '20', *args[2:])   # until the node is found
+        return self.argv(['ros2', *args])
+
+    def run(self, *args: str, cwd: Path | None = None,
+            timeout: float = 60.0) -> subprocess.CompletedProcess[str]:
+        """``ros2 args...`` to its end: its exit code and output."""
+        return subprocess.run(self.command(args), cwd=cwd or self.workspace.root,
+                              env=self.env, capture_output=True, text=True, timeout=timeout)
+
+    def run_all(self, commands: list[tuple[str, ...]],
+                timeout: float = 60.0) -> list[subprocess.CompletedProcess[str]]:
+        """Several ``ros2`` commands at once (each waits for discovery on its own, so
+        together they take the time of one), to their ends, in order."""
+        procs = [subprocess.Popen(self.command(args), cwd=self.workspace.root, env=self.env,
+                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                 for args in commands]
+        results = []
+        for proc in procs:
+            out, err = proc.communicate(timeout=timeout)
+            results.append(subprocess.CompletedProcess(proc.args, proc.returncode, out, err))
+        return results
+
+    def start(self, argv: list[str], cwd: Path, log: Path) -> subprocess.Popen[str]:
+        """``argv`` in a session of its own (a terminal's foreground job), its output
+        (stdout and stderr) into ``log``."""
+        stream = log.open('w')
+        proc = subprocess.Popen(self.argv(argv), cwd=cwd, env=self.env, stdout=stream,
+                                stderr=subprocess.STDOUT, text=True, start_new_session=True)
+        stream.close()
+        self.processes.append(proc)
+        return proc
+
+    def cleanup(self) -> None:
+        """Whatever a failed test left running (each session's processes)."""
+        for proc in self.processes:
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait(timeout=10)
+
+
+def ctrl_c(proc: subprocess.Popen[str], timeout: float) -> int:
+    """SIGINT to ``proc``'s session, as Ctrl-C in its terminal sends it to every
+    process of the foreground job; its exit code."""
+    os.killpg(proc.pid, signal.SIGINT)
+    return proc.wait(timeout=timeout)
+
+
+def wait_nodes(ros: Any, names: set[str], procs: list[subprocess.Popen[str]],
+               timeout: float = 60.0) -> None:
+    """Spin a probe until the nodes ``names`` (full names) are in the graph, failing
+    at once when one of ``procs`` has ended."""
+    probe = ros.node('cli_probe')
+
+    def seen() -> set[str]:
+        return {f'{ns.rstrip("/")}/{name}'
+                for name, ns in probe.get_node_names_and_namespaces()}
+
+    deadline = time.monotonic() + timeout
+    while not names <= seen():
+        ended = [p.args for p in procs if p.poll() is not None]
+        assert not ended and time.monotonic() < deadline, (ended, names - seen())
+        ros.spin_for(0.05)
+
+
+def doc_commands(path: Path, start: str) -> list[list[str]]:
+    """The command lines beginning with ``start`` in the shell blocks of the document
+    ``path`` (continuation lines joined, comments dropped), as argv lists."""
+    commands: list[list[str]] = []
+    for block in re.findall(r'```(?:bash|console)\n(.*?)```', path.read_text(), re.S):
+        for line in block.replace('\\\n', ' ').splitlines():
+            line = line.removeprefix('$ ')
+            if line.startswith(start):
+                commands.append(shlex.split(line, comments=True))
+    return commands
+
+
+def overrides(argv: list[str]) -> dict[str, str]:
+    """The ``-p NAME:=VALUE`` of a command line."""
+    return dict(argv[i + 1].split(':=', 1) for i, arg in enumerate(argv[:-1]) if arg == '-p')
