@@ -42,8 +42,8 @@ $(STAMP): setup.py setup.cfg package.xml requirements/ros-jazzy.txt requirements
 	@touch $(STAMP)
 
 ros2-cli: $(STAMP)
-	@if [ -x "$(TILTROV_ROS2_CLI)/install.sh" ]; then \
-		"$(TILTROV_ROS2_CLI)/install.sh" $(VENV); \
+	@if [ -f "$(TILTROV_ROS2_CLI)/install.sh" ]; then \
+		bash "$(TILTROV_ROS2_CLI)/install.sh" $(VENV); \
 	else \
 		echo "no ros2 command line at TILTROV_ROS2_CLI=$(TILTROV_ROS2_CLI): the tests with the real ros2 are skipped"; \
 	fi

@@ -328,3 +328,17 @@ def alive(pid: int) -> bool:
     except ProcessLookupError:
         return False
     return True
+
+
+#: The series of a recorded run that equal the headless runner's (``run_scenario``).
+RUN_SERIES = ('t', 'position', 'quaternion', 'nu', 'thrust', 'tc', 'wrench_cmd',
+              'thrust_cmd', 'tilt_cmd', 'wrench_achieved')
+
+
+def assert_same_run(recorded: Any, expected: Any) -> None:
+    """A recorded lockstep run (``read_runlog``) is the headless run: nothing missing,
+    every series to 1e-9."""
+    assert recorded.meta['bag']['missing'] == {}
+    for name in RUN_SERIES:
+        np.testing.assert_allclose(getattr(recorded, name), getattr(expected, name),
+                                   rtol=0, atol=1e-9, err_msg=name)

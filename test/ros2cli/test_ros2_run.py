@@ -4,7 +4,6 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 import dataclasses
 from pathlib import Path
 import re
@@ -19,6 +18,7 @@ import yaml
 
 from tiltrov_ros.core.names import STACK_TOPICS
 from tiltrov_ros.nodes.parameter_docs import NODES as PARAMETERS
+from tiltrov_ros.nodes.parameters import _flatten as flatten
 
 REPO = Path(__file__).resolve().parents[2]
 NODES = ('plant_simulator', 'wrench_controller', 'thrust_allocator', 'reference_publisher',
@@ -28,16 +28,6 @@ DECLARED = {p.node: p.names | {'use_sim_time'} for p in PARAMETERS}
 #: node -> its own parameters (Param, by full name).
 TABLES = {p.node: [dataclasses.replace(param, name=table.full_name(param.name))
                    for table in (*p.tables, *p.shared) for param in table] for p in PARAMETERS}
-
-
-def _flat(doc: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for key, value in doc.items():
-        if isinstance(value, Mapping):
-            out.update(_flat(value, f'{prefix}{key}.'))
-        else:
-            out[f'{prefix}{key}'] = value
-    return out
 
 
 def _described(text: str) -> dict[str, str]:
@@ -80,7 +70,7 @@ def test_ros2_run_every_node_as_documented(ros: Any, ros2: Ros2, tmp_path: Path)
     dumps = {}
     for node, dumped, described in zip(nodes, first[:len(nodes)], first[len(nodes):]):
         assert dumped.returncode == 0, dumped.stdout + dumped.stderr
-        values = dumps[node] = _flat(yaml.safe_load(dumped.stdout)[f'/{node}']['ros__parameters'])
+        values = dumps[node] = flatten(yaml.safe_load(dumped.stdout)[f'/{node}']['ros__parameters'])
         # rclpy dumps nothing at all when one parameter has no value.
         assert DECLARED[node] <= set(values), (node, DECLARED[node] - set(values))
         assert not [n for n, v in values.items() if v is None or isinstance(v, bytes)], node
