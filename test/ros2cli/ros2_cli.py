@@ -66,16 +66,36 @@ class Ros2:
 
     def run_all(self, commands: list[tuple[str, ...]],
                 timeout: float = 60.0) -> list[subprocess.CompletedProcess[str]]:
-        """Several ``ros2`` commands at once (each waits for discovery on its own, so
-        together they take the time of one), to their ends, in order."""
-        procs = [subprocess.Popen(self.command(args), cwd=self.workspace.root, env=self.env,
-                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-                 for args in commands]
-        results = []
-        for proc in procs:
-            out, err = proc.communicate(timeout=timeout)
-            results.append(subprocess.CompletedProcess(proc.args, proc.returncode, out, err))
-        return results
+        """Several ``ros2`` commands to their ends, results in order. They run in rounds
+        in which each ``ros2 param`` command talks to a different node (each waits for
+        discovery on its own, so a round takes the time of one command); two requests
+        to one node are never in flight at once."""
+        rounds: list[list[int]] = []
+        for i, args in enumerate(commands):
+            target = args[2] if args[:1] == ('param',) and len(args) > 2 else None
+            for batch in rounds:
+                if target is None or target not in {commands[j][2] for j in batch
+                                                    if commands[j][:1] == ('param',)}:
+                    batch.append(i)
+                    break
+            else:
+                rounds.append([i])
+        results: dict[int, subprocess.CompletedProcess[str]] = {}
+        for batch in rounds:
+            procs = {i: subprocess.Popen(self.command(commands[i]), cwd=self.workspace.root,
+                                         env=self.env, stdout=subprocess.PIPE,
+                                         stderr=subprocess.PIPE, text=True) for i in batch}
+            try:
+                for i, proc in procs.items():
+                    out, err = proc.communicate(timeout=timeout)
+                    results[i] = subprocess.CompletedProcess(proc.args, proc.returncode,
+                                                             out, err)
+            finally:
+                for proc in procs.values():
+                    if proc.poll() is None:
+                        proc.kill()
+                        proc.wait(timeout=10)
+        return [results[i] for i in range(len(commands))]
 
     def start(self, argv: list[str], cwd: Path, log: Path) -> subprocess.Popen[str]:
         """``argv`` in a session of its own (a terminal's foreground job), its output
