@@ -29,6 +29,23 @@ def missing_cli() -> str | None:
                 f'in a ROS 2 Jazzy install')
     return None
 
+#: A line of Fast DDS's own log (``2026-01-01 00:00:00.000 [RTPS_TRANSPORT_SHM Error] ...``,
+#: colored), which it prints on stdout: e.g. a shared-memory port another process holds.
+_DDS_LOG = re.compile(r'^\d{4}-\d\d-\d\d \d\d:\d\d:\d\d\.\d+ \[\w+ (Error|Warning|Info)\]')
+_ANSI = re.compile(r'\x1b\[[0-9;]*m')
+
+
+def without_dds_log(result: subprocess.CompletedProcess[str]
+                    ) -> subprocess.CompletedProcess[str]:
+    """``result`` with Fast DDS's log lines moved from stdout to stderr: the command's
+    own output is what the user reads and what the tests compare."""
+    kept, moved = [], []
+    for line in result.stdout.splitlines(keepends=True):
+        (moved if _DDS_LOG.match(_ANSI.sub('', line)) else kept).append(line)
+    return subprocess.CompletedProcess(result.args, result.returncode, ''.join(kept),
+                                       ''.join(moved) + result.stderr)
+
+
 #: ros2 verbs that look at the graph (through the daemon, unless --no-daemon).
 GRAPH_VERBS = ('node', 'param', 'topic', 'service')
 #: ros2 param verbs that wait (--timeout) until the node is discovered.
@@ -61,8 +78,9 @@ class Ros2:
     def run(self, *args: str, cwd: Path | None = None,
             timeout: float = 60.0) -> subprocess.CompletedProcess[str]:
         """``ros2 args...`` to its end: its exit code and output."""
-        return subprocess.run(self.command(args), cwd=cwd or self.workspace.root,
-                              env=self.env, capture_output=True, text=True, timeout=timeout)
+        return without_dds_log(subprocess.run(
+            self.command(args), cwd=cwd or self.workspace.root, env=self.env,
+            capture_output=True, text=True, timeout=timeout))
 
     def run_all(self, commands: list[tuple[str, ...]],
                 timeout: float = 60.0) -> list[subprocess.CompletedProcess[str]]:
@@ -88,8 +106,8 @@ class Ros2:
             try:
                 for i, proc in procs.items():
                     out, err = proc.communicate(timeout=timeout)
-                    results[i] = subprocess.CompletedProcess(proc.args, proc.returncode,
-                                                             out, err)
+                    results[i] = without_dds_log(subprocess.CompletedProcess(
+                        proc.args, proc.returncode, out, err))
             finally:
                 for proc in procs.values():
                     if proc.poll() is None:
