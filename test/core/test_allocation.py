@@ -14,6 +14,7 @@ from tiltrov_ros.core.allocation import (
     AllocationResult,
     ThrustAllocator,
 )
+from tiltrov_ros.core.allocation.closed_form import candidates
 from tiltrov_ros.core.errors import AllocationError
 from tiltrov_ros.core.thrust_map import allocation_matrix, q_vector, thrust_wrench
 
@@ -545,7 +546,7 @@ def test_near_degenerate_wrench_is_snapped_to_its_family_in_robust_mode() -> Non
     previous = robust.allocate(clean, start)          # a member of the clean family
     assert previous.method == 'family' and previous.feasible
     hairy = clean + np.array([0, 3e-8, 0, 2e-9, 0, -5e-8])
-    exact_roots, _ = robust._candidates(hairy)
+    exact_roots, _ = candidates(robust.geometry, hairy)
     assert exact_roots and all(np.max(np.abs(c.tilts - previous.tilts)) > step
                                for c in exact_roots)
     result = robust.allocate(hairy, previous)

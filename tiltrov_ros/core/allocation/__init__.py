@@ -1,0 +1,37 @@
+"""Thrust allocation: a body wrench to four thrusts and two tilts (Section 3 of the paper).
+
+The public API (``ThrustAllocator``, its results and its configuration) is
+imported from here; the modules hold one concern each.
+"""
+
+from tiltrov_ros.core.allocation.allocator import (
+    DEFAULT_WEIGHTS,
+    Mode,
+    ThrustAllocator,
+    allocate_sequence,
+)
+from tiltrov_ros.core.allocation.config import (
+    ALLOCATOR_YAML,
+    AllocatorConfig,
+    load_allocator_config,
+)
+from tiltrov_ros.core.allocation.results import (
+    FEASIBILITY_RTOL,
+    AllocationResult,
+    BatchResult,
+    infeasible_rows,
+)
+
+__all__ = [
+    'ALLOCATOR_YAML',
+    'DEFAULT_WEIGHTS',
+    'FEASIBILITY_RTOL',
+    'AllocationResult',
+    'AllocatorConfig',
+    'BatchResult',
+    'Mode',
+    'ThrustAllocator',
+    'allocate_sequence',
+    'infeasible_rows',
+    'load_allocator_config',
+]
