@@ -186,14 +186,14 @@ def solve_batch(geometry: Geometry, tau: FloatArray,
     real = disc >= -slack
     sq = np.sqrt(np.maximum(disc, 0.0))
     qq = -0.5 * (b + np.where(b >= 0, sq, -sq))
-    with np.errstate(divide='ignore', invalid='ignore'):
+    with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
         u1 = np.where(a != 0, qq / a, np.nan)
         u2 = np.where(qq != 0, c / qq, np.where(a == 0, 0.0, np.nan))
     roots = [np.where(real, u1, np.nan), np.where(real, u2, np.nan),
              np.where(small_P, 0.0, np.nan), np.where(small_Q, kappa, np.nan)]
     U = np.stack(roots, axis=1)
     U = np.where(any_family[:, None], np.nan, U)
-    with np.errstate(divide='ignore', invalid='ignore'):
+    with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
         v_p = P[:, None] / U
         v_q = H[:, None] - Q[:, None] / (U - kappa[:, None])
     V = np.where(np.abs(U) >= np.abs(U - kappa[:, None]), v_p, v_q)

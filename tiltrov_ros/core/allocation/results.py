@@ -39,9 +39,10 @@ class AllocationResult:
     discriminant : discriminant of (**) for the wrench scaled to max |tau_i| = 1;
         NaN where (**) does not apply (families, zero wrench, fixed tilts)
     error : weighted wrench error ||W (achieved - requested)||
-    target : robust mode, when not feasible: the tilts of the exact solution
-        out of reach that the servos are (or would be) heading for, else None
-    stuck : robust mode: consecutive infeasible calls with such a target
+    target : robust mode, ``transit``: the tilts the servos are heading for
+        (:mod:`.planner`), else None
+    stuck : robust mode: consecutive calls, this one included, without an exact
+        solution within reach (0 when this one is exact)
     """
 
     thrusts: FloatArray
