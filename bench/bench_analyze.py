@@ -131,7 +131,7 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
                         help="time the per-message rosbags baseline too (default: yes)")
     args = parser.parse_args(argv)
 
-    from tiltrov_ros.analyze import analyze
+    from tiltrov_ros.analysis.analyze import analyze
     from tiltrov_ros.bag.bagfile import bag_info
     from tiltrov_ros.bag.reader import RUNLOG_TOPICS, read_runlog
 

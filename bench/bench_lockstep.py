@@ -14,7 +14,7 @@ Measured in one run, so the ratios hold on any machine:
   t_i and the ``thrust_cmd`` stamped t_i (both DDS reception times in the
   probe's process), median and 99th percentile.
 
-Aims (issue 6): RTF >= 10 with separate processes, >= 20 in a single process;
+Aims: RTF >= 10 with separate processes, >= 20 in a single process;
 latency < 2 ms at the 99th percentile.
 
 Run ``python bench/bench_lockstep.py`` (about a minute); ``main()`` returns the
@@ -92,7 +92,8 @@ def latency(seconds_of_sim: float, real_time_factor: float,
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import JointState
 
-    from tiltrov_ros.nodes.common import ODOM, THRUST_CMD, WRENCH_CMD, stamp_ns
+    from tiltrov_ros.core.names import ODOM, THRUST_CMD, WRENCH_CMD
+    from tiltrov_ros.nodes.conversions import stamp_ns
 
     args = ['--scenario', 'pitch_hold', '--realtime', '--real-time-factor',
             repr(float(real_time_factor)), '--duration', repr(seconds_of_sim),
@@ -113,7 +114,7 @@ def latency(seconds_of_sim: float, real_time_factor: float,
     # The probe's participant is created while the nodes start (once the launcher has
     # started the plant's process): without multicast, participants created far apart
     # in time find each other only at the next periodic announcement (Fast DDS: 3 s),
-    # see README.md, "Lockstep and realtime".
+    # see docs/launch.md, "Lockstep and realtime".
     launch = subprocess.Popen(_launch_argv(*args), stdout=subprocess.PIPE,
                               stderr=subprocess.STDOUT, text=True, cwd=tempfile.gettempdir())
     lines: list[str] = []

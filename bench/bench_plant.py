@@ -10,8 +10,9 @@ Measured in one run, so the ratios hold on any machine:
   10 ms, 2 400 control ticks at 50 ms.
 
 The closed loop uses a small depth/attitude PD and a least-squares allocator at
-fixed (vertical) tilts defined below: stand-ins until ``core/controllers.py``
-and ``core/allocation.py`` exist.
+fixed (vertical) tilts defined below, deliberately cheap so that the run
+measures the plant and the runner: the real controllers and allocator are
+timed by ``bench_allocation.py`` and, in the loop, by ``bench_lockstep.py``.
 
 Run ``python bench/bench_plant.py``; ``main()`` returns the numbers as a dict
 and prints a table (for ``tiltrov bench``).
@@ -52,7 +53,7 @@ class _Result:
 
 
 class StandInController:
-    """PD on depth, roll and pitch (stand-in for core/controllers.py)."""
+    """PD on depth, roll and pitch: a cheap stand-in for the core controllers."""
 
     def update(self, t: float, position: np.ndarray, quaternion: np.ndarray, nu: np.ndarray,
                reference: Any) -> _Output:
@@ -66,7 +67,7 @@ class StandInController:
 
 
 class StandInAllocator:
-    """Least squares on eq. (5) at fixed tilts (stand-in for core/allocation.py).
+    """Least squares on eq. (5) at fixed tilts: a cheap stand-in for the core allocator.
 
     The least-squares solution is the pseudo-inverse of B(tilts) = A G(tilts),
     cached per tilt pair.

@@ -169,7 +169,7 @@ def bench_recorder(count: int, depth: int, rate: float, out: Path,
 
     context = Context()
     rclpy.init(context=context)
-    recorder = BagRecorder(context=context, params={
+    recorder = BagRecorder(context=context, parameter_overrides={
         'output': str(out), 'topics': list(TOPICS), 'compression': compression})
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(recorder)

@@ -8,6 +8,10 @@
   to it and torn down in order (executor shutdown, destroy nodes, shutdown).
 * ``spin_until``: spins in a capped loop with a wall-clock timeout.
 * Per-test timeout: ``timeout`` in pyproject.toml (pytest-timeout).
+* Hypothesis: profile ``ci`` (derandomized: the same examples every run, no
+  example database) when ``TILTROV_HYPOTHESIS_PROFILE=ci`` or ``CI`` is set, as
+  ``make test`` and ``.ci/run`` do; otherwise Hypothesis's random default, to
+  find new cases while developing.
 """
 
 from __future__ import annotations
@@ -19,6 +23,7 @@ import random
 import time
 from typing import Any
 
+from hypothesis import settings
 import pytest
 
 if 'TILTROV_TEST_DOMAIN_ID' not in os.environ:
@@ -31,6 +36,11 @@ os.environ.pop('ROS_STATIC_PEERS', None)
 os.environ.setdefault('MPLBACKEND', 'Agg')
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
+
+settings.register_profile('ci', derandomize=True, database=None, print_blob=True)
+settings.register_profile('dev')
+settings.load_profile(os.environ.get('TILTROV_HYPOTHESIS_PROFILE')
+                      or ('ci' if os.environ.get('CI') else 'dev'))
 
 
 def pytest_report_header(config: pytest.Config) -> str:

@@ -7,6 +7,13 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+import json
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import threading
 import time
 from typing import Any
 
@@ -18,10 +25,13 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
-from tiltrov_ros import launcher
-from tiltrov_ros.nodes.common import stamp_ns
+from tiltrov_ros.core import names
+from tiltrov_ros.core.names import PLANT
+from tiltrov_ros.core.timebase import NS_PER_S as NS
+from tiltrov_ros.nodes.conversions import stamp_ns
+from tiltrov_ros.stack.inprocess import build_nodes
+from tiltrov_ros.stack.specs import LaunchOptions, NodeSpec, stack_specs
 
-NS = 1_000_000_000
 MS = 1_000_000
 
 #: Probe readers: reliable, keep everything (the stack's writers are reliable).
@@ -153,7 +163,7 @@ class StackRun:
 
     nodes: list[Any]
     probe: Probe
-    specs: list[launcher.NodeSpec]
+    specs: list[NodeSpec]
     config: Any
     duration: float
     extra: dict[str, Any] = field(default_factory=dict)
@@ -162,11 +172,11 @@ class StackRun:
         return next(n for n, s in zip(self.nodes, self.specs) if s.name == name)
 
 
-STACK_TOPICS = ('odom', 'joint_states', '/clock', 'setpoint', 'setpoint_velocity',
-                'wrench_cmd', 'tilt_request', 'thrust_cmd', 'tilt_cmd', 'wrench_achieved')
+#: The stack's topics but /diagnostics.
+STACK_TOPICS = tuple(t for t in names.STACK_TOPICS if t != names.DIAGNOSTICS)
 
 
-def run_stack(context: Any, executor: Any, options: launcher.LaunchOptions, *,
+def run_stack(context: Any, executor: Any, options: LaunchOptions, *,
               topics: Sequence[str] = STACK_TOPICS, timeout: float = 60.0,
               namespace: str = '') -> StackRun:
     """Build the launcher's nodes in ``context``, spin ``executor`` until the plant ends.
@@ -176,16 +186,16 @@ def run_stack(context: Any, executor: Any, options: launcher.LaunchOptions, *,
     """
     import rclpy
 
-    specs, config, duration = launcher.stack_specs(options, extra_odom_readers=1)
+    specs, config, duration = stack_specs(options, extra_odom_readers=1)
     probe_node = rclpy.create_node('stack_probe', context=context,
                                    namespace=namespace or None)
     probe = Probe(probe_node, topics)
-    nodes = launcher.build_nodes(specs, context, namespace)
+    nodes = build_nodes(specs, context, namespace)
     run = StackRun(nodes, probe, specs, config, duration)
     try:
         for node in (probe_node, *nodes):
             executor.add_node(node)
-        plant = run.node(launcher.PLANT)
+        plant = run.node(PLANT)
         assert spin(executor, plant.finished.done, timeout), (
             f'the plant stopped at {plant.plant.time_ns / NS} s of {duration} s')
         # The last messages: the state at the end reaches the probe.
@@ -228,6 +238,82 @@ def report(ros: Any, probe: Probe, node: Any) -> dict[str, str]:
 
 def finite_outputs(probe: Probe) -> bool:
     """No message the probe received carries NaN or infinity."""
-    from tiltrov_ros.nodes.common import message_is_finite
+    from tiltrov_ros.nodes.conversions import message_is_finite
     return all(message_is_finite(m) for topic, messages in probe.messages.items()
                for m in messages if topic != '/diagnostics')
+
+
+# --------------------------------------------------------------------------- processes
+
+
+class LaunchProcess:
+    """``tiltrov launch`` as a process: its output (read by a thread, so the pipe never
+    fills) and its ``--status-file`` (the pids of the nodes it started, its state)."""
+
+    def __init__(self, tmp_path: Path, *args: str) -> None:
+        self.status_path = tmp_path / 'launch_status.json'
+        self.process = subprocess.Popen(
+            [sys.executable, '-m', 'tiltrov_ros.cli', 'launch', *args, '--status-file',
+             str(self.status_path)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+            text=True, cwd=tmp_path)
+        self.lines: list[str] = []
+        self._reader = threading.Thread(
+            target=lambda: self.lines.extend(self.process.stdout or ()), daemon=True)
+        self._reader.start()
+        self.seen: set[int] = set()      # every pid the status file ever named
+
+    @property
+    def output(self) -> str:
+        return ''.join(self.lines)
+
+    def status(self) -> dict[str, Any]:
+        try:
+            status = json.loads(self.status_path.read_text())
+        except (FileNotFoundError, json.JSONDecodeError):
+            return {}
+        self.seen |= {node['pid'] for node in status['nodes'].values()}
+        return status
+
+    def pids(self) -> dict[str, int]:
+        return {name: node['pid'] for name, node in self.status().get('nodes', {}).items()}
+
+    def wait_running(self, timeout: float = 60.0) -> dict[str, int]:
+        """The nodes' pids once every node is started (state ``running``)."""
+        deadline = time.monotonic() + timeout
+        while self.status().get('state') != 'running':
+            assert time.monotonic() < deadline and self.process.poll() is None, self.output
+            time.sleep(0.05)
+        return self.pids()
+
+    def finish(self, timeout: float) -> int:
+        code = self.process.wait(timeout=timeout)
+        self._reader.join(timeout=5)
+        return code
+
+    def cleanup(self) -> None:
+        """Whatever a failed test left running: the launcher and the nodes it started."""
+        if self.process.poll() is None:
+            self.process.kill()
+            self.process.wait(timeout=10)
+        self.status()
+        for pid in self.seen:
+            if alive(pid):
+                os.kill(pid, signal.SIGKILL)
+
+
+def ready(ros: Any, names: Sequence[str], until: Any = None,
+           timeout: float = 60.0) -> Probe:
+    """Spin until every node in ``names`` has published /diagnostics (it is built and
+    spinning, its signal handlers installed) and ``until(probe)`` holds."""
+    probe = Probe(ros.node('launch_probe'), ['/diagnostics'])
+    assert ros.spin_until(lambda: all(diagnostics(probe, name) for name in names)
+                          and (until is None or until(probe)), timeout=timeout)
+    return probe
+
+
+def alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True

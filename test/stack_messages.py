@@ -16,8 +16,8 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
 from tiltrov_ros.bag.msgdefs import typestore
+from tiltrov_ros.core.timebase import NS_PER_S as NS
 
-NS = 1_000_000_000
 RUN_INFO = {'scenario': 'positioning', 'controller': 'pd', 'max_thrust': 40.0}
 
 

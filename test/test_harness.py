@@ -3,15 +3,55 @@
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 
 from geometry_msgs.msg import WrenchStamped
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from std_msgs.msg import String
+
+_TALKER = """
+import sys, time
+import rclpy
+from rclpy.context import Context
+from std_msgs.msg import String
+
+publishers = []
+for label, domain in (('other', int(sys.argv[1])), ('inherited', None)):
+    context = Context()
+    rclpy.init(context=context, domain_id=domain)   # None: the environment's ROS_DOMAIN_ID
+    node = rclpy.create_node(f'isolation_{label}', context=context)
+    publishers.append((label, node.create_publisher(String, 'isolation_probe', 10)))
+deadline = time.monotonic() + 60
+while time.monotonic() < deadline:
+    for label, publisher in publishers:
+        publisher.publish(String(data=label))
+    time.sleep(0.02)
+"""
 
 
-def test_dds_isolation_is_set() -> None:
-    domain = int(os.environ['ROS_DOMAIN_ID'])
-    assert 1 <= domain <= 101
-    assert os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] == 'LOCALHOST'
+def test_subprocesses_hear_this_session_and_other_domains_are_not_heard(ros) -> None:
+    """What the session's DDS isolation promises: a process a test starts inherits the
+    session's domain (the launch tests rely on it), and a participant in another domain
+    on this machine (another test run) is not heard."""
+    own = int(os.environ['ROS_DOMAIN_ID'])
+    other = own % 101 + 1
+    listener = ros.node('isolation_listener')
+    heard: list[str] = []
+    listener.create_subscription(String, 'isolation_probe', lambda m: heard.append(m.data),
+                                 QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+    talker = subprocess.Popen([sys.executable, '-c', _TALKER, str(other)])
+    try:
+        assert ros.spin_until(lambda: 'inherited' in heard, timeout=60.0)
+        # Long enough for any participant of this domain on this machine to be found
+        # (without multicast, periodic announcements come up to 3 s apart).
+        ros.spin_for(5.0)
+        assert heard.count('inherited') >= 100
+    finally:
+        talker.kill()
+        talker.wait(timeout=10)
+    assert 'other' not in heard
+    assert 1 <= own <= 101 and other != own
 
 
 def test_message_round_trip_through_dds(ros) -> None:

@@ -20,14 +20,16 @@ import numpy as np
 import pytest
 from ros_stack import Probe, effort_rows
 
-from tiltrov_ros import cli, launcher
+from tiltrov_ros import cli
+from tiltrov_ros.analysis.reallocate import compare, read_control
 from tiltrov_ros.bag.bagfile import iter_raw
-from tiltrov_ros.bag.cdr import stamp_ns
+from tiltrov_ros.bag.cdr import leading_stamp_ns
 from tiltrov_ros.bag.reader import read_runlog
 from tiltrov_ros.core.metrics import metric_differences
+from tiltrov_ros.core.names import ALLOCATOR
 from tiltrov_ros.core.timebase import to_ns
-from tiltrov_ros.launcher import LaunchOptions
-from tiltrov_ros.reallocate import compare, read_control
+from tiltrov_ros.stack.specs import LaunchOptions, stack_specs
+from tiltrov_ros.stack.supervisor import executable
 
 SCENARIO = 'pitch_hold'
 DURATION = '5'          # s of sim time: 501 plant steps, 100 control ticks
@@ -99,14 +101,14 @@ def test_replayed_wrench_cmd_drives_the_allocator_like_the_live_stack(
     assert n == 100
     # Every wrench_cmd message in replay order; a stalled lockstep tick may have
     # been published twice (same stamp, same wrench).
-    replayed = sorted(stamp_ns(m.data, m.msgtype) for m in iter_raw(bag, ['/wrench_cmd']))
+    replayed = sorted(leading_stamp_ns(m.data, m.msgtype) for m in iter_raw(bag, ['/wrench_cmd']))
     assert sorted(set(replayed)) == [int(ns) for ns in control.stamps]
     probe_node = ros.node('replay_probe')
     probe = Probe(probe_node, ['thrust_cmd', 'tilt_cmd', 'wrench_achieved'])
-    specs, _, _ = launcher.stack_specs(LaunchOptions(scenario=SCENARIO, controller='pd',
+    specs, _, _ = stack_specs(LaunchOptions(scenario=SCENARIO, controller='pd',
                                                      duration=float(DURATION)))
-    spec = next(s for s in specs if s.name == launcher.ALLOCATOR)
-    allocator = subprocess.Popen(launcher.executable(spec)
+    spec = next(s for s in specs if s.name == ALLOCATOR)
+    allocator = subprocess.Popen(executable(spec)
                                  + spec.ros_args(spec.write_overrides(tmp_path)),
                                  stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     player = None
@@ -150,7 +152,7 @@ def test_replayed_wrench_cmd_drives_the_allocator_like_the_live_stack(
 
 @pytest.mark.slow
 def test_a_120_s_lockstep_run_is_recorded_without_losing_a_message(tmp_path: Path) -> None:
-    """Issue 7's sizing check: the 120 s trajectory (the busiest shipped scenario)
+    """The sizing check: the 120 s trajectory (the busiest shipped scenario)
     in separate processes; every message each node publishes is in the bag.
 
     The publishers' side is counted from the run's definition: the plant

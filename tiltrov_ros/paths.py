@@ -1,5 +1,8 @@
 """Where the package's shipped files (config YAML, scenarios) live.
 
+At the bottom of the package's layers: it imports nothing of the package, so
+the core can find ``config/`` without reaching up.
+
 Three layouts are supported, tried in this order:
 
 1. a source checkout or editable install: ``config/`` next to ``package.xml``

@@ -6,11 +6,12 @@ does with its ``progress`` argument::
     with ProgressBar('pitch_hold pd') as bar:
         log = run_scenario(config, progress=bar)
 
-Nothing is shown for jobs that finish within ``delay`` seconds (1 s), so short
-runs and tests stay quiet. On a terminal the bar is redrawn in place
-(``label [#########           ]  45%  2.1 s``, at most ten times a second); when
-stderr is a file or a pipe, one plain line is written at each quarter instead,
-so logs stay readable.
+A second argument, a short text (``'12/400 runs, 1 failed, ETA 3m05s'``), is
+shown after the time. Nothing is shown for jobs that finish within ``delay``
+seconds (1 s), so short runs and tests stay quiet. On a terminal the bar is
+redrawn in place (``label [#########           ]  45%  2.1 s``, at most ten
+times a second); when stderr is a file or a pipe, one plain line is written at
+each quarter instead, so logs stay readable.
 """
 
 from __future__ import annotations
@@ -20,6 +21,8 @@ import sys
 import time
 from types import TracebackType
 from typing import TextIO
+
+_ERASE_LINE_END = '\x1b[K'     # ANSI: clear what a longer earlier text left on the line
 
 
 class ProgressBar:
@@ -49,14 +52,16 @@ class ProgressBar:
         self._start = clock()
         self._last_draw = -1.0
         self._fraction = 0.0
+        self._detail = ''
         self._quarter = 0
         self.shown = False
         self._open_line = False
         isatty = getattr(self.stream, 'isatty', None)
         self.interactive = bool(isatty()) if callable(isatty) else False
 
-    def __call__(self, fraction: float) -> None:
+    def __call__(self, fraction: float, detail: str = '') -> None:
         self._fraction = min(max(float(fraction), 0.0), 1.0)
+        self._detail = f'  {detail}' if detail else ''
         now = self._clock()
         elapsed = now - self._start
         if elapsed < self.delay:
@@ -71,14 +76,15 @@ class ProgressBar:
                 self._quarter = quarter
                 self.shown = True
                 self.stream.write(f'{self.label}: {100 * self._fraction:3.0f}%  '
-                                  f'{elapsed:.1f} s\n')
+                                  f'{elapsed:.1f} s{self._detail}\n')
                 self.stream.flush()
 
     def _draw(self, elapsed: float) -> None:
         filled = round(self.width * self._fraction)
         bar = '#' * filled + ' ' * (self.width - filled)
+        erase = _ERASE_LINE_END if self._detail else ''
         self.stream.write(f'\r{self.label} [{bar}] {100 * self._fraction:3.0f}%  '
-                          f'{elapsed:.1f} s')
+                          f'{elapsed:.1f} s{self._detail}{erase}')
         self.stream.flush()
         self.shown = True
         self._open_line = True

@@ -13,10 +13,12 @@ from tiltrov_ros.bag import cdr
 from tiltrov_ros.bag import reader as bag_reader
 from tiltrov_ros.bag.export import _Messages
 from tiltrov_ros.bag.reader import ODOMETRY, PLANT_JOINTS, WRENCH, Decoder, _TopicBatches
+from tiltrov_ros.core import names
+from tiltrov_ros.core.names import STACK_TOPICS
 
 M = _Messages()
 STORE = M.store
-ODOM = 'nav_msgs/msg/Odometry'
+ODOM = STACK_TOPICS[names.ODOM]
 JOINTS = 'sensor_msgs/msg/JointState'
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from rosbags.typesys import Stores, get_typestore
 
-from tiltrov_ros.bag.cdr import has_leading_stamp, stamp_ns
+from tiltrov_ros.bag.cdr import has_leading_stamp, leading_stamp_ns
 
 STORE = get_typestore(Stores.ROS2_JAZZY)
 T = STORE.types
@@ -23,13 +23,13 @@ def test_stamp_of_stamped_messages_and_clock_in_both_byte_orders() -> None:
         little = bytes(STORE.serialize_cdr(msg, msgtype))
         big = bytes(STORE.serialize_cdr(msg, msgtype, little_endian=False))
         assert little[1] == 1 and big[1] == 0
-        assert stamp_ns(little, msgtype) == stamp_ns(big, msgtype) == 12_345_678_901
+        assert leading_stamp_ns(little, msgtype) == leading_stamp_ns(big, msgtype) == 12_345_678_901
 
 
 def test_types_without_a_leading_stamp() -> None:
     string = bytes(STORE.serialize_cdr(T['std_msgs/msg/String'](data='hello world'),
                                        'std_msgs/msg/String'))
     assert not has_leading_stamp('std_msgs/msg/String')
-    assert stamp_ns(string, 'std_msgs/msg/String') is None
+    assert leading_stamp_ns(string, 'std_msgs/msg/String') is None
     assert not has_leading_stamp('my_pkg/msg/Unknown')
-    assert stamp_ns(b'\x00\x01\x00\x00', 'geometry_msgs/msg/WrenchStamped') is None  # short
+    assert leading_stamp_ns(b'\x00\x01\x00\x00', 'geometry_msgs/msg/WrenchStamped') is None  # short

@@ -14,8 +14,8 @@ from tiltrov_ros.bag.msgdefs import (
     message_definition,
     typestore,
 )
-from tiltrov_ros.bag.topics import STACK_TOPICS
 from tiltrov_ros.core.errors import BagError
+from tiltrov_ros.core.names import STACK_TOPICS
 
 TYPES = sorted({*STACK_TOPICS.values(), 'rcl_interfaces/msg/Log',
                 'rcl_interfaces/msg/ParameterEvent', 'sensor_msgs/msg/CameraInfo',

@@ -12,7 +12,7 @@ import pytest
 
 from tiltrov_ros.bag.bagfile import RUN_INFO_KEY
 from tiltrov_ros.bag.msgdefs import typestore
-from tiltrov_ros.bag.reader import SETPOINT, WRENCH, read_runlog, read_series
+from tiltrov_ros.bag.reader import POSE, WRENCH, read_runlog, read_series
 from tiltrov_ros.bag.writer import BagWriter
 from tiltrov_ros.core.errors import BagError
 
@@ -223,7 +223,7 @@ def test_read_series_checks_types_and_sorts_by_stamp(tmp_path: Path) -> None:
     assert_array_equal(wrench_series.stamps, np.array(TICKS) * H)
     assert (np.diff(wrench_series.stamps) > 0).all()
     with pytest.raises(BagError, match='expected geometry_msgs/msg/PoseStamped'):
-        read_series(tmp_path / 'bag', {'/rov1/wrench_cmd': SETPOINT}, progress=False)
+        read_series(tmp_path / 'bag', {'/rov1/wrench_cmd': POSE}, progress=False)
 
 
 def test_progress_bar_on_request(tmp_path, capsys) -> None:

@@ -22,7 +22,7 @@ from stack_messages import STACK, canonical
 from tiltrov_ros.bag.replay import Player, ReplayOptions, parse_remaps
 from tiltrov_ros.bag.writer import BagWriter
 from tiltrov_ros.core.errors import BagError
-from tiltrov_ros.nodes.bag_recorder import clock_ns
+from tiltrov_ros.core.timebase import cdr_stamp_ns
 
 START = 5_000_000_000  # log time of the first message, ns
 TYPES = {'/odom': 'nav_msgs/msg/Odometry', '/wrench_cmd': 'geometry_msgs/msg/WrenchStamped',
@@ -156,7 +156,7 @@ def test_generated_clock_for_a_bag_without_one(ros: Any, tmp_path: Path) -> None
     run_player(ros, tmp_path / 'bag', options, should_stop=lambda p: False,
                until=lambda: listener.count('/odom') == 49)
     ros.spin_for(0.2)
-    assert [clock_ns(d) for _, d in listener.got['/clock']] == ticks
+    assert [cdr_stamp_ns(d) for _, d in listener.got['/clock']] == ticks
 
 
 def test_bad_options_are_bag_errors(tmp_path: Path) -> None:

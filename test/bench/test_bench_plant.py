@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+import math
 from pathlib import Path
 import sys
 
@@ -19,8 +20,10 @@ def test_bench_plant_main_returns_its_numbers(capsys: pytest.CaptureFixture[str]
     monkeypatch.setitem(sys.modules, 'bench_plant', module)   # dataclasses look it up
     spec.loader.exec_module(module)
     results = module.main(['--steps', '200', '--repeats', '1', '--duration', '1.0'])
+    # The headless run it times is the one asked for: 1 s, 10 ms steps, 50 ms ticks.
     assert results['run_plant_steps'] == 100.0
     assert results['run_control_ticks'] == 20.0
-    assert results['rk4_over_euler'] == results['rk4_step_us'] / results['euler_step_us']
-    assert all(value > 0.0 for value in results.values())
-    assert 'real_time_factor' in capsys.readouterr().out
+    assert all(math.isfinite(value) and value > 0.0 for value in results.values())
+    out = capsys.readouterr().out
+    for key, value in results.items():      # every number is in the printed table
+        assert key in out and f'{value:12.3f}' in out, key

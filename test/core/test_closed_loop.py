@@ -1,9 +1,9 @@
-"""The controllers in closed loop on the paper's two scenarios (issue 5's acceptance).
+"""The controllers in closed loop on the paper's two scenarios.
 
 Short versions run in every suite; the full 60 s pitch_hold runs and the slow
 servo case are marked ``slow`` (a few seconds each, still part of ``make
-test``). The numbers asserted are the issue's; README.md ("Results") has the
-full-length values from ``make figures``.
+test``). The numbers asserted are the checks of the results page;
+docs/results.md has the full-length values from ``make figures``.
 """
 
 from __future__ import annotations

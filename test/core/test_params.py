@@ -28,7 +28,7 @@ def test_shipped_config_gives_the_papers_values() -> None:
     assert p.mass_matrix == PAPER_M
     assert p.quadratic_damping == PAPER_D
     assert p.source is not None and p.source.endswith('robot.yaml')
-    # The estimates are the ones documented in robot-parameters.md.
+    # The estimates are the ones config/robot.yaml documents with their reasoning.
     assert p.linear_damping == (0.0,) * 6
     assert (p.weight, p.buoyancy) == (638.0, 643.0)
     assert p.center_of_gravity == (0.0, 0.0, 0.02)

@@ -8,8 +8,8 @@ import pytest
 
 from tiltrov_ros.core import validation as v
 from tiltrov_ros.core.errors import ParameterError
+from tiltrov_ros.core.timebase import NS_PER_S as NS
 
-NS = 1_000_000_000
 BOUNDS = v.StampBounds.from_seconds(0.5, 5.0)
 
 

@@ -38,13 +38,14 @@ from std_msgs.msg import String
 
 from tiltrov_ros.bag.bagfile import RUN_INFO_KEY
 from tiltrov_ros.core.errors import ParameterError
-from tiltrov_ros.nodes.bag_recorder import BagRecorder, clock_ns, recorder_command
+from tiltrov_ros.core.timebase import cdr_stamp_ns
+from tiltrov_ros.nodes.bag_recorder import BagRecorder, recorder_command
 from tiltrov_ros.paths import config_file
 
 
 def test_records_a_live_run_byte_for_byte(ros: Any, tmp_path: Path) -> None:
     bag = tmp_path / 'run'
-    recorder = ros.add(BagRecorder(context=ros.context, params={
+    recorder = ros.add(BagRecorder(context=ros.context, parameter_overrides={
         'output': str(bag), 'run_info': json.dumps(RUN_INFO), 'discovery_period': 0.1,
         'exclude_topics': ['/rosout', '/parameter_events']}))  # every other topic
     stack = ros.node('stack')
@@ -122,7 +123,7 @@ def test_log_time_is_sim_time_with_clock_handled_before_data(ros: Any, tmp_path:
     """With use_sim_time, /clock is logged at its value and the data published after
     it at that value, even when the executor serves the data subscription first."""
     bag = tmp_path / 'sim'
-    recorder = ros.add(BagRecorder(context=ros.context, params={
+    recorder = ros.add(BagRecorder(context=ros.context, parameter_overrides={
         'output': str(bag), 'use_sim_time': True, 'topics': ['odom', '/clock']}))
     stack = ros.node('plant')
     clock_pub = stack.create_publisher(Clock, '/clock', 10)
@@ -139,7 +140,7 @@ def test_log_time_is_sim_time_with_clock_handled_before_data(ros: Any, tmp_path:
         log = {topic: [] for topic in ('/clock', '/odom')}
         for conn, log_time, data in reader.messages():
             log[conn.topic].append((log_time, data))
-    assert [t for t, _ in log['/clock']] == [clock_ns(d) for _, d in log['/clock']]
+    assert [t for t, _ in log['/clock']] == [cdr_stamp_ns(d) for _, d in log['/clock']]
     assert [t for t, _ in log['/odom']] == [(1000 + i) * 10_000_000 for i in steps]
 
 
@@ -147,7 +148,7 @@ def test_parameters_from_the_shipped_file_and_their_limits(ros: Any, tmp_path: P
     shipped = config_file('bag_recorder.yaml')
     recorder = ros.add(BagRecorder(
         context=ros.context, cli_args=['--ros-args', '--params-file', str(shipped)],
-        params={'output': str(tmp_path / 'a')}))
+        parameter_overrides={'output': str(tmp_path / 'a')}))
     assert recorder.config.topics == ()          # every topic
     assert recorder.config.compression == 'none'
     assert recorder.config.queue_depth == 10000
@@ -166,14 +167,16 @@ def test_parameters_from_the_shipped_file_and_their_limits(ros: Any, tmp_path: P
         assert json.loads(reader.storage.metadata.custom[RUN_INFO_KEY]) == {'scenario': 'late'}
 
     with pytest.raises(ParameterError, match='compression'):
-        BagRecorder(context=ros.context, params={'output': str(tmp_path / 'b'),
-                                                 'compression': 'lz4'}).destroy_node()
-    with pytest.raises(InvalidParameterValueException):
-        BagRecorder(context=ros.context, params={'output': str(tmp_path / 'c'),
-                                                 'queue_depth': -1}).destroy_node()
+        BagRecorder(context=ros.context, parameter_overrides={
+            'output': str(tmp_path / 'b'), 'compression': 'lz4'}).destroy_node()
+    # rclpy refuses the value out of range; the node names it (as every node does).
+    with pytest.raises(ParameterError, match='queue_depth') as info:
+        BagRecorder(context=ros.context, parameter_overrides={
+            'output': str(tmp_path / 'c'), 'queue_depth': -1}).destroy_node()
+    assert isinstance(info.value.__cause__, InvalidParameterValueException)
     with pytest.raises(ParameterError, match='run_info'):
-        BagRecorder(context=ros.context, params={'output': str(tmp_path / 'd'),
-                                                 'run_info': 'not json'}).destroy_node()
+        BagRecorder(context=ros.context, parameter_overrides={
+            'output': str(tmp_path / 'd'), 'run_info': 'not json'}).destroy_node()
 
 
 def test_defaults_without_a_parameter_file(ros: Any, tmp_path: Path,

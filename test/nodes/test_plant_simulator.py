@@ -12,14 +12,15 @@ from rclpy.parameter import Parameter
 from ros_stack import KEEP_ALL, MS, NS, Probe, finite_outputs, joint_state, report
 from sensor_msgs.msg import JointState
 
+from tiltrov_ros.core import names
 from tiltrov_ros.core.errors import ParameterError
 from tiltrov_ros.core.runner import stack_config
 from tiltrov_ros.nodes import plant_simulator
 from tiltrov_ros.nodes.plant_simulator import PlantSimulator
 from tiltrov_ros.paths import config_file
 
-THRUSTERS = ['thruster_1', 'thruster_2', 'thruster_3', 'thruster_4']
-TILTS = ['tilt_front', 'tilt_rear']
+THRUSTERS = list(names.THRUSTERS)
+TILTS = list(names.TILTS)
 STEP = 10 * MS
 
 
@@ -110,6 +111,49 @@ def test_lockstep_rejected_command_holds_the_previous_and_advances(rig) -> None:
     assert node.rejected_messages == 2
     assert node.plant.thrusters.command_held == (5.0, 5.0, 5.0, 5.0)
     assert ros.spin_until(lambda: probe.stamps('odom') == [i * STEP for i in range(16)])
+
+
+def test_lockstep_a_late_first_answer_gets_the_initial_state_once(rig) -> None:
+    """The first commands 1.5 s late (as when the controller holds its outputs until the
+    bag recorder reads them): the initial state goes out once, so a recording has one
+    state per step (before: again every 0.25 s, each recorded)."""
+    ros, probe, command, _ = rig
+    node = _plant(ros, mode='lockstep')
+    assert ros.spin_until(lambda: probe.stamps('odom') == [0])
+    ros.spin_for(1.5)       # the late answer is the input: nothing may happen meanwhile
+    command(0, [0.0] * 4, [0.0, 0.0])
+    assert ros.spin_until(lambda: node.plant.time_ns == 5 * STEP)
+    steps = [i * STEP for i in range(6)]
+    assert ros.spin_until(lambda: probe.stamps('/clock') == steps)
+    assert probe.stamps('odom') == probe.stamps('joint_states') == steps
+    assert (node.startup_retries, node.stalls) == (0, 0)
+
+
+def test_lockstep_a_reader_matched_after_the_initial_state_gets_it_again(rig) -> None:
+    """A reader of odom matched once the initial state is out (a node started late)
+    cannot have it: the plant publishes it again."""
+    ros, probe, _command, _ = rig
+    node = _plant(ros, mode='lockstep')
+    assert ros.spin_until(lambda: probe.stamps('odom') == [0])
+    late = Probe(ros.node('late_reader'), ['odom'])
+    assert ros.spin_until(lambda: late.stamps('odom') == [0])
+    assert node.startup_retries == 1 and probe.stamps('odom') == [0, 0]
+
+
+def test_lockstep_a_command_for_a_tick_not_reached_is_rejected(rig) -> None:
+    """Valid commands stamped for a tick ahead (a tool, a replay): rejected as
+    ``future_stamp``; they do not stand in for the real answers when the tick comes."""
+    ros, probe, command, _ = rig
+    node = _plant(ros, mode='lockstep')
+    assert ros.spin_until(lambda: probe.stamps('odom') == [0])
+    command(5 * STEP, [40.0] * 4, [1.0, 1.0])
+    assert ros.spin_until(lambda: node.rejections[('thrust_cmd', 'future_stamp')] == 1
+                          and node.rejections[('tilt_cmd', 'future_stamp')] == 1)
+    command(0, [1.0] * 4, [0.0, 0.0])
+    assert ros.spin_until(lambda: node.plant.time_ns == 5 * STEP)
+    ros.spin_for(0.2)       # it waits at 50 ms: nothing answered that tick
+    assert node.plant.time_ns == 5 * STEP
+    assert node.plant.thrusters.command_held == (1.0, 1.0, 1.0, 1.0)
 
 
 def test_lockstep_stall_republishes_the_tick_and_is_reported(rig) -> None:
@@ -297,11 +341,13 @@ def test_bad_command_is_rejected_counted_and_the_run_goes_on(ros, case) -> None:
 
 def test_realtime_command_watchdog_zero_thrust_and_recovery(rig) -> None:
     ros, probe, command, _ = rig
-    plant = _plant(ros, mode='realtime', real_time_factor=5.0, command_timeout=0.3)
+    # The thrust needs 0.3 s of sim time (3 time constants) to pass 19 N: the timeout
+    # leaves it 0.7 s more, so the check below never races the watchdog.
+    plant = _plant(ros, mode='realtime', real_time_factor=5.0, command_timeout=1.0)
     assert ros.spin_until(lambda: len(probe['odom']) > 0)
     command(plant.plant.time_ns, [20.0] * 4, [0.0, 0.0])
     assert ros.spin_until(lambda: plant.plant.thrusts[0] > 19.0)
-    # No more commands: after 0.3 s of sim time the thrusters are commanded to zero.
+    # No more commands: after 1 s of sim time the thrusters are commanded to zero.
     assert ros.spin_until(lambda: plant.commands_stale, timeout=5.0)
     assert plant.plant.thrusters.command_held == (0.0,) * 4
     assert ros.spin_until(lambda: abs(probe['joint_states'][-1].effort[2]) < 0.1)

@@ -20,10 +20,11 @@ from ros_stack import (
     wrench_rows,
 )
 
-from tiltrov_ros import launcher
+from tiltrov_ros.core.names import ALLOCATOR, CONTROLLER, PLANT
 from tiltrov_ros.core.runner import run_scenario, stack_config
-from tiltrov_ros.nodes.common import make_executor
+from tiltrov_ros.nodes.executors import make_executor
 from tiltrov_ros.paths import config_file
+from tiltrov_ros.stack.specs import LaunchOptions
 
 ATOL = 1e-9
 STEP = 10 * MS
@@ -48,7 +49,7 @@ CASES = [
 @pytest.mark.parametrize(('scenario', 'controller', 'duration'), CASES)
 def test_lockstep_odometry_equals_the_headless_run(ros, scenario: str, controller: str,
                                                    duration: float) -> None:
-    options = launcher.LaunchOptions(scenario=scenario, controller=controller,
+    options = LaunchOptions(scenario=scenario, controller=controller,
                                      duration=duration)
     run = run_stack(ros.context, ros.executor, options)
     log = run_scenario(stack_config(scenario, controller), duration=duration)
@@ -87,7 +88,7 @@ def test_lockstep_odometry_equals_the_headless_run(ros, scenario: str, controlle
     # The switching baseline's tilt requests travel with the same stamps.
     if controller == 'switching':
         assert sorted(set(run.probe.stamps('tilt_request'))) == ticks
-        assert run.node(launcher.CONTROLLER).controller.switches >= 2
+        assert run.node(CONTROLLER).controller.switches >= 2
     else:
         assert run.probe['tilt_request'] == []
     assert run.extra['stalls'] == 0
@@ -97,7 +98,7 @@ def test_lockstep_odometry_equals_the_headless_run(ros, scenario: str, controlle
 def test_two_lockstep_runs_record_identical_odometry_on_different_executors(ros) -> None:
     """Determinism does not depend on scheduling: rclpy's SingleThreadedExecutor (a
     Python wait set), then its EventsExecutor (a C++ event queue), bit for bit."""
-    options = launcher.LaunchOptions(scenario='trajectory', controller='switching',
+    options = LaunchOptions(scenario='trajectory', controller='switching',
                                      duration=3.0)
     first = run_stack(ros.context, ros.executor, options)
     executor = make_executor(ros.context, 'events')
@@ -120,7 +121,7 @@ def test_two_lockstep_runs_record_identical_odometry_on_different_executors(ros)
 @pytest.mark.slow
 def test_realtime_closed_loop_keeps_the_stamp_contract(ros) -> None:
     """The four nodes in realtime mode (x10): every answer bears the stamp it answers."""
-    options = launcher.LaunchOptions(scenario='pitch_hold', controller='pd', duration=1.5,
+    options = LaunchOptions(scenario='pitch_hold', controller='pd', duration=1.5,
                                      lockstep=False, real_time_factor=10.0)
     run = run_stack(ros.context, ros.executor, options)
     odom = run.probe.stamps('odom')
@@ -146,7 +147,7 @@ def test_thruster_failure_lockstep_equals_the_headless_run_and_is_reported(
     text = (config_file('scenarios/thruster_failure.yaml').read_text()
             .replace('at: 40.0', 'at: 1.0'))
     scenario.write_text(text)
-    options = launcher.LaunchOptions(scenario=str(scenario), controller='pd', duration=2.0)
+    options = LaunchOptions(scenario=str(scenario), controller='pd', duration=2.0)
     run = run_stack(ros.context, ros.executor, options)
     log = run_scenario(stack_config(str(scenario), 'pd'), duration=2.0)
     ticks = [i * TICK for i in range(40)]
@@ -158,7 +159,7 @@ def test_thruster_failure_lockstep_equals_the_headless_run_and_is_reported(
     np.testing.assert_allclose(position, log.position, rtol=0, atol=ATOL)
     assert all(thrust[t].effort[1] == 0.0 for t in ticks[20:])
 
-    allocator, plant = run.node(launcher.ALLOCATOR), run.node(launcher.PLANT)
+    allocator, plant = run.node(ALLOCATOR), run.node(PLANT)
     assert allocator.failed == (1,) and plant.plant.failed_thrusters == (1,)
     _, message, values = allocator.diagnostic_status()
     assert 'failed: thruster_2' in message and 'not achieved (ticks)' in message

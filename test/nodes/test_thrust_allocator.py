@@ -27,7 +27,7 @@ from sensor_msgs.msg import JointState
 from tiltrov_ros.core.allocation import load_allocator_config
 from tiltrov_ros.core.errors import ParameterError
 from tiltrov_ros.core.params import load_robot_params
-from tiltrov_ros.nodes.common import stamp_ns
+from tiltrov_ros.nodes.conversions import stamp_ns
 from tiltrov_ros.nodes.thrust_allocator import ThrustAllocatorNode
 from tiltrov_ros.paths import config_file
 
@@ -134,19 +134,33 @@ def test_tilt_request_timeout_uses_the_latest(rig) -> None:
     assert list(probe['tilt_cmd'][1].position) == [0.1, 0.1]
 
 
-def test_auto_mode_follows_the_graph(rig) -> None:
+def test_auto_mode_pairs_once_a_request_carries_a_wrench_stamp(rig) -> None:
     ros, node, probe, pub = rig
     alloc = _allocator(ros)
     assert ros.spin_until(lambda: pub.get_subscription_count() > 0)
     pub.publish(wrench(0, W1))
-    assert ros.spin_until(_answered(probe, 1))          # no tilt_request publisher: free
+    assert ros.spin_until(_answered(probe, 1))          # no tilt_request: free
     tilt_pub = node.create_publisher(JointState, 'tilt_request', KEEP_ALL)
     assert ros.spin_until(lambda: alloc.count_publishers('tilt_request') > 0)
+    # A publisher, and a request with a stamp no wrench carries: still free.
+    tilt_pub.publish(joint_state(9 * TICK, ['tilt_front', 'tilt_rear'], position=[0.3, 0.3]))
+    assert ros.spin_until(lambda: alloc.requests_received == 1)
     pub.publish(wrench(TICK, W1))
-    ros.spin_for(0.2)
-    assert len(probe['thrust_cmd']) == 1                 # now it waits for the request
-    tilt_pub.publish(joint_state(TICK, ['tilt_front', 'tilt_rear'], position=[0.0, 0.0]))
     assert ros.spin_until(_answered(probe, 2))
+    assert alloc.requests_matched == 0 and list(probe['tilt_cmd'][1].position) != [0.3, 0.3]
+    # A request with the next wrench's stamp: the tilts are fixed by it, and from now
+    # on each wrench waits for its request.
+    tilt_pub.publish(joint_state(2 * TICK, ['tilt_front', 'tilt_rear'], position=[0.1, 0.1]))
+    assert ros.spin_until(lambda: alloc.requests_received == 2)
+    pub.publish(wrench(2 * TICK, W1))
+    assert ros.spin_until(_answered(probe, 3))
+    assert alloc.requests_matched == 1
+    pub.publish(wrench(3 * TICK, W1))
+    assert ros.spin_until(lambda: alloc._waiting is not None)
+    assert len(probe['thrust_cmd']) == 3
+    tilt_pub.publish(joint_state(3 * TICK, ['tilt_front', 'tilt_rear'], position=[0.0, 0.0]))
+    assert ros.spin_until(_answered(probe, 4))
+    assert alloc.requests_matched == 2
 
 
 def test_diagnostics_count_feasible_infeasible_and_saturated(rig) -> None:

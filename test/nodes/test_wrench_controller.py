@@ -29,7 +29,7 @@ from tiltrov_ros.core.controllers import Reference, load_controller_config, make
 from tiltrov_ros.core.errors import ParameterError
 from tiltrov_ros.core.kinematics import quat_from_euler
 from tiltrov_ros.core.params import load_robot_params
-from tiltrov_ros.nodes.common import stamp_ns
+from tiltrov_ros.nodes.conversions import stamp_ns
 from tiltrov_ros.nodes.wrench_controller import WrenchController
 from tiltrov_ros.paths import config_file
 

@@ -1,6 +1,6 @@
-"""Bag tools: the MCAP writer behind ``bag_recorder``, reading a bag into a
-:class:`~tiltrov_ros.core.runlog.RunLog`, ``tiltrov bag repair`` and
-``tiltrov replay``.
+"""The rosbag2/MCAP library: the writer behind ``bag_recorder``, reading a bag into a
+:class:`~tiltrov_ros.core.runlog.RunLog`, repair, the replay ``Player`` and
+``RunLog`` -> bag. A library: it imports no command and no node.
 
 Importing this package does not import rclpy; only :mod:`.qos` and
 :mod:`.replay` (and the recorder node) need it.

@@ -4,9 +4,9 @@ ROS 2 messages travel as XCDR1 ("CDR"): a 4-byte encapsulation header (byte 1
 is 0x01 for little endian, 0x00 for big endian), then the fields in order,
 each aligned to its own size counted from the end of the encapsulation header.
 
-* :func:`stamp_ns`: the header stamp of a message whose first field is a
-  ``std_msgs/Header`` (or a ``builtin_interfaces/Time``, as ``/clock``): the
-  first 8 bytes after the encapsulation, ``int32 sec`` and ``uint32 nanosec``.
+* :func:`leading_stamp_ns`: the header stamp of a message whose first field
+  is a ``std_msgs/Header`` (or a ``builtin_interfaces/Time``, as ``/clock``),
+  read by :func:`~tiltrov_ros.core.timebase.cdr_stamp_ns`.
 * :func:`walk`: the :class:`Layout` of one message (where each primitive field
   is, which bytes fix the layout). A topic's messages nearly always share one
   layout (same frame ids, joint names and sequence lengths), so whole batches
@@ -27,11 +27,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from tiltrov_ros.core.timebase import CDR_ENCAPSULATION, NS_PER_S, cdr_stamp_ns
+
 from .msgdefs import typestore
 
-ENCAPSULATION = 4
-_LE = struct.Struct('<iI')
-_BE = struct.Struct('>iI')
+ENCAPSULATION = CDR_ENCAPSULATION
 _STAMPED_FIRST = ('std_msgs/msg/Header', 'builtin_interfaces/msg/Time')
 
 
@@ -49,14 +49,12 @@ def has_leading_stamp(msgtype: str) -> bool:
     return isinstance(detail, str) and detail in _STAMPED_FIRST
 
 
-def stamp_ns(data: bytes | memoryview, msgtype: str) -> int | None:
+def leading_stamp_ns(data: bytes | memoryview, msgtype: str) -> int | None:
     """The leading stamp of a serialized message, in ns (None: the type has none, or
     the bytes are too short)."""
     if not has_leading_stamp(msgtype) or len(data) < ENCAPSULATION + 8:
         return None
-    layout = _LE if data[1] == 1 else _BE
-    sec, nanosec = layout.unpack_from(data, ENCAPSULATION)
-    return int(sec) * 1_000_000_000 + int(nanosec)
+    return cdr_stamp_ns(data)
 
 
 # --------------------------------------------------------------------------- fixed layouts
@@ -200,7 +198,7 @@ def read_stamps(buffer: bytes, count: int, layout: Layout,
                      strides=(layout.size,)).astype(np.int64)
     nanosec = np.ndarray((count,), dtype=nsec_type, buffer=buffer, offset=nsec_at,
                          strides=(layout.size,)).astype(np.int64)
-    stamps: NDArray[np.int64] = sec * 1_000_000_000 + nanosec
+    stamps: NDArray[np.int64] = sec * NS_PER_S + nanosec
     return stamps
 
 

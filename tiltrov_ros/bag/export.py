@@ -2,7 +2,7 @@
 
 The inverse of :func:`tiltrov_ros.bag.reader.read_runlog`: the messages the
 nodes would have published for that run (ARCHITECTURE.md, "Time and stamps";
-frames and joint names of interfaces.md), serialized by rosbags and written
+frames and joint names of :mod:`tiltrov_ros.core.names`), serialized by rosbags and written
 with the project's :class:`~tiltrov_ros.bag.writer.BagWriter`, no ROS needed.
 Uses: turning a headless run into a bag for bag tools (Foxglove, ``tiltrov
 replay``), bags with known content for tests, and large bags for benchmarks.
@@ -25,21 +25,32 @@ from typing import Any
 
 import numpy as np
 
-from ..core.runlog import RunLog
-from ..core.timebase import to_ns
+from tiltrov_ros.core.names import (
+    CLOCK,
+    FRAME_BODY,
+    FRAME_EARTH,
+    JOINT_STATES,
+    ODOM,
+    SETPOINT,
+    SETPOINT_VELOCITY,
+    STACK_TOPICS,
+    THRUST_CMD,
+    THRUSTERS,
+    TILT_CMD,
+    TILTS,
+    WRENCH_ACHIEVED,
+    WRENCH_CMD,
+    join_namespace,
+)
+from tiltrov_ros.core.runlog import RunLog
+from tiltrov_ros.core.timebase import ns_to_stamp, to_ns
+
 from .bagfile import RUN_INFO_KEY
 from .msgdefs import typestore
-from .topics import CLOCK_TOPIC, STACK_TOPICS, join_namespace
 from .writer import BagWriter
 
-# interfaces.md: earth and body frame ids, joint names.
-FRAME_EARTH = 'odom_ned'
-FRAME_BODY = 'base_link_frd'
-THRUSTERS = ('thruster_1', 'thruster_2', 'thruster_3', 'thruster_4')
-TILTS = ('tilt_front', 'tilt_rear')
-PLANT_TOPICS = ('odom', 'joint_states', CLOCK_TOPIC)
-CONTROL_TOPICS = ('setpoint', 'setpoint_velocity', 'wrench_cmd', 'tilt_cmd', 'thrust_cmd',
-                  'wrench_achieved')
+PLANT_TOPICS = (ODOM, JOINT_STATES, CLOCK)
+CONTROL_TOPICS = (SETPOINT, SETPOINT_VELOCITY, WRENCH_CMD, TILT_CMD, THRUST_CMD, WRENCH_ACHIEVED)
 #: joint_states fields a joint does not have: 0.0, as the plant fills them (no NaN on a topic).
 ABSENT2 = (0.0, 0.0)
 ABSENT4 = (0.0,) * 4
@@ -59,7 +70,7 @@ class _Messages:
         self.zeros36 = np.zeros(36)
 
     def header(self, ns: int, frame: str) -> Any:
-        sec, nanosec = divmod(ns, 1_000_000_000)
+        sec, nanosec = ns_to_stamp(ns)
         return self.Header(stamp=self.Time(sec=sec, nanosec=nanosec), frame_id=frame)
 
     def pose(self, p: Any, q_wxyz: Any) -> Any:
@@ -102,7 +113,7 @@ class _Messages:
                                torque=self.Vector3(x=w[3], y=w[4], z=w[5])))
 
     def clock(self, ns: int) -> Any:
-        sec, nanosec = divmod(ns, 1_000_000_000)
+        sec, nanosec = ns_to_stamp(ns)
         return self.types['rosgraph_msgs/msg/Clock'](clock=self.Time(sec=sec, nanosec=nanosec))
 
 
@@ -112,20 +123,20 @@ def _rows(log: RunLog, m: _Messages) -> Iterator[tuple[int, str, Any]]:
     control_ns = [to_ns(float(t)) for t in log.tc]
     k = 0
     builders: dict[str, Callable[[int, int], Any]] = {
-        'setpoint': lambda j, ns: m.pose_stamped(ns, log.setpoint_position[j],
+        SETPOINT: lambda j, ns: m.pose_stamped(ns, log.setpoint_position[j],
                                                  log.setpoint_quaternion[j]),
-        'setpoint_velocity': lambda j, ns: m.twist_stamped(ns, log.setpoint_velocity[j]),
-        'wrench_cmd': lambda j, ns: m.wrench(ns, log.wrench_cmd[j]),
-        'tilt_cmd': lambda j, ns: m.joints(ns, TILTS, position=log.tilt_cmd[j]),
-        'thrust_cmd': lambda j, ns: m.joints(ns, THRUSTERS, effort=log.thrust_cmd[j]),
-        'wrench_achieved': lambda j, ns: m.wrench(ns, log.wrench_achieved[j]),
+        SETPOINT_VELOCITY: lambda j, ns: m.twist_stamped(ns, log.setpoint_velocity[j]),
+        WRENCH_CMD: lambda j, ns: m.wrench(ns, log.wrench_cmd[j]),
+        TILT_CMD: lambda j, ns: m.joints(ns, TILTS, position=log.tilt_cmd[j]),
+        THRUST_CMD: lambda j, ns: m.joints(ns, THRUSTERS, effort=log.thrust_cmd[j]),
+        WRENCH_ACHIEVED: lambda j, ns: m.wrench(ns, log.wrench_achieved[j]),
     }
     for i, ns in enumerate(plant_ns):
-        yield ns, 'odom', m.odom(ns, log.position[i], log.quaternion[i], log.nu[i])
-        yield ns, 'joint_states', m.joints(
+        yield ns, ODOM, m.odom(ns, log.position[i], log.quaternion[i], log.nu[i])
+        yield ns, JOINT_STATES, m.joints(
             ns, TILTS + THRUSTERS, position=(*log.tilt_position[i], *ABSENT4),
             velocity=(*log.tilt_velocity[i], *ABSENT4), effort=(*ABSENT2, *log.thrust[i]))
-        yield ns, CLOCK_TOPIC, m.clock(ns)
+        yield ns, CLOCK, m.clock(ns)
         while k < len(control_ns) and control_ns[k] <= ns:
             for topic in CONTROL_TOPICS:
                 yield control_ns[k], topic, builders[topic](k, control_ns[k])

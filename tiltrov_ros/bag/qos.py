@@ -36,7 +36,7 @@ from rosbags.interfaces import (
     QosTime,
 )
 
-NS_PER_S = 1_000_000_000
+from tiltrov_ros.core.timebase import ns_to_stamp
 
 _HISTORY = {
     HistoryPolicy.SYSTEM_DEFAULT: QosHistory.SYSTEM_DEFAULT,
@@ -64,8 +64,7 @@ _LIVELINESS = {
 
 
 def _qos_time(duration: Duration) -> QosTime:
-    sec, nsec = divmod(int(duration.nanoseconds), NS_PER_S)
-    return QosTime(sec, nsec)
+    return QosTime(*ns_to_stamp(duration.nanoseconds))
 
 
 def to_bag_qos(profile: QoSProfile) -> Qos:

@@ -3,9 +3,11 @@
 Two layers, so the analysis (``tiltrov analyze``) and re-running parts of the
 stack on recorded inputs can plug in at either:
 
-* :func:`read_series` decodes chosen topics in one pass over the bag (rosbags'
-  pure Python CDR decoder, no rclpy) into :class:`Series`: header stamps (int
-  ns) and named float columns, sorted by stamp;
+* :func:`read_series` decodes chosen topics in one pass over the bag into
+  :class:`Series`: header stamps (int ns) and named float columns, sorted by
+  stamp. No rclpy: batches of messages that share a CDR layout are read with
+  numpy at the fields' offsets (:mod:`.cdr`), each layout checked against
+  rosbags' decoding of one message; the rest is decoded by rosbags one by one;
 * :func:`read_runlog` builds the two grids of ARCHITECTURE.md from them by the
   stamp contract:
 
@@ -39,18 +41,29 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..core.errors import BagError
-from ..core.runlog import CONTROL_FIELDS, PLANT_FIELDS, FloatArray, RunLog
-from ..core.timebase import seconds, stamp_to_ns
-from ..progress import ProgressBar
+from tiltrov_ros.core.errors import BagError
+from tiltrov_ros.core.names import (
+    JOINT_STATES,
+    ODOM,
+    SETPOINT,
+    SETPOINT_VELOCITY,
+    THRUST_CMD,
+    THRUSTERS,
+    TILT_CMD,
+    TILTS,
+    WRENCH_ACHIEVED,
+    WRENCH_CMD,
+    join_namespace,
+)
+from tiltrov_ros.core.runlog import CONTROL_FIELDS, PLANT_FIELDS, FloatArray, RunLog
+from tiltrov_ros.core.timebase import seconds, stamp_to_ns
+from tiltrov_ros.progress import ProgressBar
+
 from . import cdr
 from .bagfile import bag_info, open_reader
 from .msgdefs import typestore
-from .topics import join_namespace
 
 NAN = math.nan
-THRUSTERS = ('thruster_1', 'thruster_2', 'thruster_3', 'thruster_4')
-TILTS = ('tilt_front', 'tilt_rear')
 
 Row = Sequence[float]
 
@@ -132,26 +145,26 @@ ODOMETRY = Decoder('nav_msgs/msg/Odometry', {'position': 3, 'quaternion': 4, 'nu
 PLANT_JOINTS = Decoder('sensor_msgs/msg/JointState',
                        {'tilt_position': 2, 'tilt_velocity': 2, 'thrust': 4},
                        _joints((TILTS, 'position'), (TILTS, 'velocity'), (THRUSTERS, 'effort')))
-SETPOINT = Decoder('geometry_msgs/msg/PoseStamped', {'position': 3, 'quaternion': 4}, _fixed(
+POSE = Decoder('geometry_msgs/msg/PoseStamped', {'position': 3, 'quaternion': 4}, _fixed(
     *_vector('pose.position'), *_quaternion_wxyz('pose.orientation')))
-SETPOINT_VELOCITY = Decoder('geometry_msgs/msg/TwistStamped', {'velocity': 6}, _fixed(
+TWIST = Decoder('geometry_msgs/msg/TwistStamped', {'velocity': 6}, _fixed(
     *_vector('twist.linear'), *_vector('twist.angular')))
 WRENCH = Decoder('geometry_msgs/msg/WrenchStamped', {'wrench': 6}, _fixed(
     *_vector('wrench.force'), *_vector('wrench.torque')))
-THRUST_CMD = Decoder('sensor_msgs/msg/JointState', {'thrust': 4},
+THRUSTS = Decoder('sensor_msgs/msg/JointState', {'thrust': 4},
                      _joints((THRUSTERS, 'effort')))
-TILT_CMD = Decoder('sensor_msgs/msg/JointState', {'tilt': 2}, _joints((TILTS, 'position')))
+TILT_POSITIONS = Decoder('sensor_msgs/msg/JointState', {'tilt': 2}, _joints((TILTS, 'position')))
 
 # relative topic name -> decoder, for the RunLog
 RUNLOG_TOPICS: dict[str, Decoder] = {
-    'odom': ODOMETRY,
-    'joint_states': PLANT_JOINTS,
-    'setpoint': SETPOINT,
-    'setpoint_velocity': SETPOINT_VELOCITY,
-    'wrench_cmd': WRENCH,
-    'thrust_cmd': THRUST_CMD,
-    'tilt_cmd': TILT_CMD,
-    'wrench_achieved': WRENCH,
+    ODOM: ODOMETRY,
+    JOINT_STATES: PLANT_JOINTS,
+    SETPOINT: POSE,
+    SETPOINT_VELOCITY: TWIST,
+    WRENCH_CMD: WRENCH,
+    THRUST_CMD: THRUSTS,
+    TILT_CMD: TILT_POSITIONS,
+    WRENCH_ACHIEVED: WRENCH,
 }
 
 
@@ -355,7 +368,7 @@ def rows_as_of(ticks: NDArray[np.int64], series: Series | None, column: str,
     return out, int(len(ticks) - hit.sum())
 
 
-def find_namespace(topics: Mapping[str, str], relative: str = 'odom',
+def find_namespace(topics: Mapping[str, str], relative: str = ODOM,
                    msgtype: str = ODOMETRY.msgtype) -> str:
     """The namespace of the one ``relative`` topic of type ``msgtype`` among ``topics``
     (name -> type); by default the stack's ``odom`` (nav_msgs/Odometry)."""
@@ -395,7 +408,7 @@ def read_runlog(path: str | Path, *, namespace: str | None = None,
         return series.get(names[rel])
 
     missing: dict[str, int] = {}
-    odom = get('odom')
+    odom = get(ODOM)
     if odom is None:
         raise BagError(f'{path} has no {names["odom"]} messages')
     ticks = odom.stamps
@@ -406,23 +419,23 @@ def read_runlog(path: str | Path, *, namespace: str | None = None,
         'nu': odom.columns['nu'],
     }
     for name in ('tilt_position', 'tilt_velocity', 'thrust'):
-        arrays[name], missing[name] = rows_at(ticks, get('joint_states'), name,
+        arrays[name], missing[name] = rows_at(ticks, get(JOINT_STATES), name,
                                              PLANT_FIELDS[name])
 
-    wrench_cmd = get('wrench_cmd')
+    wrench_cmd = get(WRENCH_CMD)
     control = wrench_cmd.stamps if wrench_cmd is not None else np.zeros(0, dtype=np.int64)
     arrays['tc'] = _times(control)
     control_sources: dict[str, tuple[str, str, Callable[..., tuple[FloatArray, int]]]] = {
-        'setpoint_position': ('setpoint', 'position', rows_as_of),
-        'setpoint_quaternion': ('setpoint', 'quaternion', rows_as_of),
-        'setpoint_velocity': ('setpoint_velocity', 'velocity', rows_as_of),
-        'wrench_cmd': ('wrench_cmd', 'wrench', rows_at),
-        'thrust_cmd': ('thrust_cmd', 'thrust', rows_at),
-        'tilt_cmd': ('tilt_cmd', 'tilt', rows_at),
-        'wrench_achieved': ('wrench_achieved', 'wrench', rows_at),
+        'setpoint_position': (SETPOINT, 'position', rows_as_of),
+        'setpoint_quaternion': (SETPOINT, 'quaternion', rows_as_of),
+        'setpoint_velocity': (SETPOINT_VELOCITY, 'velocity', rows_as_of),
+        'wrench_cmd': (WRENCH_CMD, 'wrench', rows_at),
+        'thrust_cmd': (THRUST_CMD, 'thrust', rows_at),
+        'tilt_cmd': (TILT_CMD, 'tilt', rows_at),
+        'wrench_achieved': (WRENCH_ACHIEVED, 'wrench', rows_at),
     }
     for name, (rel, column, join) in control_sources.items():
-        if name == 'setpoint_velocity' and names[rel] not in info.topics:
+        if rel == SETPOINT_VELOCITY and names[rel] not in info.topics:
             arrays[name] = np.zeros((len(control), CONTROL_FIELDS[name]))
             continue
         arrays[name], missing[name] = join(control, get(rel), column, CONTROL_FIELDS[name])

@@ -101,7 +101,7 @@ def _provisional(directory: Path) -> dict[str, Any]:
         data = yaml.safe_load((directory / 'metadata.yaml').read_text(encoding='utf8'))
         info = data['rosbag2_bagfile_information']
         return info if isinstance(info, dict) else {}
-    except (OSError, yaml.YAMLError, KeyError, TypeError):
+    except (OSError, ValueError, yaml.YAMLError, KeyError, TypeError):  # ValueError: not UTF-8
         return {}
 
 

@@ -1,41 +1,29 @@
-"""``tiltrov replay BAG``: publish a recorded bag into a live graph.
+"""Publishing a recorded bag into a live graph: :class:`Player` (``tiltrov replay``).
 
 Each message is published as the recorded CDR bytes (raw publishers, nothing
 deserialized), at its log time relative to the first message divided by
-``--rate``, on a fixed wall-clock schedule (no drift). ``--by-stamp`` uses the
+``rate``, on a fixed wall-clock schedule (no drift). ``by_stamp`` uses the
 header stamps instead (the stamp is read from the CDR bytes): a lockstep run
 outpaces the recorder, whose log times then bunch up, and replayed by log time
-such a bag would arrive in bursts a subscriber's queue cannot hold. ``/clock`` is only
-published with ``--clock``: the bag's own ``/clock`` messages, or, for a bag
-recorded without one, a clock generated from the log times at ``--clock-hz``,
-so nodes with ``use_sim_time`` follow the bag. Publishers offer the recorded
-reliability and durability (see :mod:`.qos`).
-
-    tiltrov replay runs/demo/bag --rate 2 --topics odom wrench_cmd \\
-        --remap odom:=/replayed/odom --clock --loop
-
-``--through allocator`` replays offline instead, without ROS: the recorded
-``wrench_cmd`` through the allocator in both modes, compared with the recorded
-answers (:mod:`tiltrov_ros.reallocate`); bad input ends with one line on
-stderr and exit code 2, as ``tiltrov analyze``.
+such a bag would arrive in bursts a subscriber's queue cannot hold. ``/clock``
+is only published with ``clock``: the bag's own ``/clock`` messages, or, for a
+bag recorded without one, a clock generated from the log times at
+``clock_hz``, so nodes with ``use_sim_time`` follow the bag. Publishers offer
+the recorded reliability and durability (see :mod:`.qos`).
 """
-
 from __future__ import annotations
 
-import argparse
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 import time
 from typing import Any
 
-from ..core.errors import BagError
-from .bagfile import BagInfo, RawMessage, bag_info, iter_raw
-from .topics import CLOCK_TOPIC, join_namespace
+from tiltrov_ros.core.errors import BagError
+from tiltrov_ros.core.names import CLOCK, join_namespace
+from tiltrov_ros.core.timebase import ns_to_stamp, seconds, to_ns
 
-#: ``--through``: the parts of the stack a bag can be replayed through offline.
-THROUGH = ('allocator',)
-THROUGH_OUT = 'runs/replay'
+from .bagfile import BagInfo, RawMessage, bag_info, iter_raw
+
 _MAX_SLEEP = 0.05  # s: sleep in slices this long so a shutdown is noticed quickly
 # s: after every publisher sees its subscribers, let the subscribers' side finish
 # matching too (DDS matches the two ends separately; a volatile reader drops what
@@ -96,10 +84,10 @@ class Player:
         if unknown:
             raise BagError(f'not in {bag}: {", ".join(sorted(unknown))}')
         self.topics = [name for name in self.info.topics
-                       if (name in wanted if wanted else name != CLOCK_TOPIC)]
-        self.generate_clock = self.options.clock and CLOCK_TOPIC not in self.info.topics
-        if self.options.clock and not self.generate_clock and CLOCK_TOPIC not in self.topics:
-            self.topics.append(CLOCK_TOPIC)
+                       if (name in wanted if wanted else name != CLOCK)]
+        self.generate_clock = self.options.clock and CLOCK not in self.info.topics
+        if self.options.clock and not self.generate_clock and CLOCK not in self.topics:
+            self.topics.append(CLOCK)
         self.publishers: dict[str, Any] = {}
         for name in self.topics:
             topic = self.info.topics[name]
@@ -111,7 +99,7 @@ class Player:
             from rosgraph_msgs.msg import Clock
 
             self._clock_pub = node.create_publisher(
-                Clock, CLOCK_TOPIC, replay_qos((), self.options.queue_depth))
+                Clock, CLOCK, replay_qos((), self.options.queue_depth))
         self.counts: dict[str, int] = {}
 
     def _ok(self, should_stop: Callable[[], bool]) -> bool:
@@ -149,11 +137,11 @@ class Player:
             for m in messages:
                 yield m.log_time, m.topic, m.data
             return
-        from .cdr import stamp_ns
+        from .cdr import leading_stamp_ns
 
         timed = []
         for m in messages:
-            stamp = stamp_ns(m.data, m.msgtype)
+            stamp = leading_stamp_ns(m.data, m.msgtype)
             timed.append((m.log_time if stamp is None else stamp, m.topic, m.data))
         timed.sort(key=lambda item: item[0])
         yield from timed
@@ -163,13 +151,13 @@ class Player:
         if not self.generate_clock:
             yield from self._timed()
             return
-        period = round(1e9 / self.options.clock_hz)
+        period = to_ns(1.0 / self.options.clock_hz)
         tick: int | None = None if self.options.by_stamp else self.info.start_ns
         for time_ns, topic, data in self._timed():
             if tick is None:
                 tick = time_ns
             while tick <= time_ns:
-                yield tick, CLOCK_TOPIC, tick
+                yield tick, CLOCK, tick
                 tick += period
             yield time_ns, topic, data
 
@@ -189,7 +177,7 @@ class Player:
             for log_time, topic, payload in self._schedule():
                 if first is None:
                     first = log_time
-                if not self._sleep_until(start_wall + (log_time - first) / 1e9 / rate,
+                if not self._sleep_until(start_wall + seconds(log_time - first) / rate,
                                          should_stop):
                     return
                 self._publish(topic, payload)
@@ -214,121 +202,10 @@ class Player:
             from rosgraph_msgs.msg import Clock
 
             msg = Clock()
-            msg.clock.sec, msg.clock.nanosec = divmod(payload, 1_000_000_000)
+            msg.clock.sec, msg.clock.nanosec = ns_to_stamp(payload)
             assert self._clock_pub is not None
             self._clock_pub.publish(msg)
         else:
             self.publishers[topic].publish(payload)
         name = self.options.remap.get(topic, topic)
         self.counts[name] = self.counts.get(name, 0) + 1
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument('bag', help='bag directory (or its .mcap file)')
-    parser.add_argument('--rate', type=float, default=1.0,
-                        help='playback speed: 2 plays twice as fast (default 1)')
-    parser.add_argument('--topics', nargs='+', default=[], metavar='TOPIC',
-                        help='replay only these topics (default: all but /clock)')
-    parser.add_argument('--remap', action='append', default=[], metavar='OLD:=NEW',
-                        help='publish topic OLD under the name NEW (repeatable)')
-    parser.add_argument('--clock', action='store_true',
-                        help="publish /clock: the bag's, or generated from the log times")
-    parser.add_argument('--clock-hz', type=float, default=100.0,
-                        help='rate of the generated /clock when the bag has none (default 100)')
-    parser.add_argument('--loop', action='store_true', help='start again at the end')
-    parser.add_argument('--by-stamp', action='store_true',
-                        help='publish on the schedule of the header stamps (sim time) instead '
-                             'of the log times: a lockstep bag, whose log times bunch up where '
-                             'the recorder lagged, replays at its simulated pace (holds the '
-                             'replayed messages in memory)')
-    parser.add_argument('--wait-for-subscribers', type=float, default=1.0, metavar='SEC',
-                        help='wait up to SEC for every topic to have a subscriber, then '
-                             f'{SETTLE} s for the matching to settle (default 1; 0: no wait)')
-    offline = parser.add_argument_group(
-        'offline (no ROS)', 'replay through a part of the stack in this process instead')
-    offline.add_argument('--through', choices=THROUGH, default=None,
-                         help='allocator: re-run the recorded wrench_cmd through the allocator '
-                              '(paper and robust modes) and compare with the recorded '
-                              'thrust_cmd/tilt_cmd')
-    offline.add_argument('--out', type=Path, default=None, metavar='DIR',
-                         help=f'--through: output directory (default: {THROUGH_OUT})')
-    offline.add_argument('--namespace', default=None, metavar='NS',
-                         help="--through: the stack's namespace in the bag (default: the "
-                              "namespace of the bag's one wrench_cmd topic)")
-    offline.add_argument('--no-figures', action='store_true',
-                         help='--through: skip allocation.png')
-    offline.add_argument('--dpi', type=int, default=None,
-                         help='--through: figure resolution (default 100)')
-
-
-def _through(args: argparse.Namespace) -> int:
-    """``--through allocator``: offline, no rclpy."""
-    from ..reallocate import check_options, reallocate, summary_lines
-    from ..simulate import print_written, report_errors
-
-    live = {'--rate': args.rate != 1.0, '--topics': bool(args.topics),
-            '--remap': bool(args.remap), '--clock': args.clock,
-            '--clock-hz': args.clock_hz != 100.0, '--loop': args.loop,
-            '--by-stamp': args.by_stamp,
-            '--wait-for-subscribers': args.wait_for_subscribers != 1.0}
-    out = args.out if args.out is not None else Path(THROUGH_OUT)
-
-    def task() -> int:
-        check_options(args.through, [name for name, given in live.items() if given])
-        namespace = None if args.namespace is None else (
-            '/' + args.namespace.strip('/') if args.namespace.strip('/') else '')
-        comparison, written = reallocate(args.bag, out, namespace=namespace,
-                                         figure=not args.no_figures,
-                                         dpi=100 if args.dpi is None else args.dpi)
-        print(f"{comparison.summary['ticks']} wrench_cmd ticks of {args.bag} through the "
-              'allocator:')
-        for line in summary_lines(comparison):
-            print(f'  {line}')
-        print_written(written, out)
-        return 0
-
-    return report_errors('tiltrov replay', task)
-
-
-def run(args: argparse.Namespace) -> int:
-    if args.through is not None:
-        return _through(args)
-    for name in ('out', 'namespace', 'dpi'):
-        if getattr(args, name) is not None:
-            print(f'tiltrov replay: --{name} needs --through')
-            return 1
-    if args.no_figures:
-        print('tiltrov replay: --no-figures needs --through')
-        return 1
-    import rclpy
-    from rclpy.executors import ExternalShutdownException
-
-    try:
-        options = ReplayOptions(rate=args.rate, topics=args.topics,
-                                remap=parse_remaps(args.remap), clock=args.clock,
-                                clock_hz=args.clock_hz, loop=args.loop,
-                                by_stamp=args.by_stamp,
-                                wait_for_subscribers=args.wait_for_subscribers)
-        bag_info(args.bag)  # fail early, before starting ROS, on a bad bag
-    except BagError as exc:
-        print(f'tiltrov replay: {exc}')
-        return 1
-    rclpy.init()
-    node = rclpy.create_node('tiltrov_replay')
-    player: Player | None = None
-    try:
-        player = Player(args.bag, node, options)
-        player.run()
-    except BagError as exc:
-        print(f'tiltrov replay: {exc}')
-        return 1
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    counts = player.counts if player is not None else {}
-    total = sum(counts.values())
-    print(f'published {total} messages: ' + ', '.join(
-        f'{name} {count}' for name, count in sorted(counts.items())))
-    return 0

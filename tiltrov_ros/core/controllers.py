@@ -34,18 +34,18 @@ from typing import Any, ClassVar, Literal, NamedTuple, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-import yaml
 
 from tiltrov_ros.core.dynamics import restoring_forces
 from tiltrov_ros.core.errors import ParameterError
 from tiltrov_ros.core.kinematics import J, Rquat, euler_from_quat, quat_normalize, ssa
 from tiltrov_ros.core.params import RobotParams
+from tiltrov_ros.core.paramtable import SHIPPED, Param, ParamTable, ros_parameters
+from tiltrov_ros.paths import config_file
 
 FloatArray = NDArray[np.float64]
 
 ControllerKind = Literal['pd', 'switching', 'pid']
 CONTROLLER_KINDS: tuple[str, ...] = ('pd', 'switching', 'pid')
-DOF_NAMES = ('x', 'y', 'z', 'roll', 'pitch', 'yaw')
 CONTROLLER_YAML = 'wrench_controller.yaml'
 
 # |cos(pitch)| under which J(eta) is evaluated at a pitch just short of +-90 deg.
@@ -101,39 +101,43 @@ class Controller(Protocol):
 
 # --------------------------------------------------------------------------- configuration
 
+_GAIN_UNITS = 'per DOF x y z roll pitch yaw: '
+#: ``gains.*``: per-DOF gains in the earth frame (defaults: the shipped file's).
+GAINS = ParamTable('gains', [
+    Param('kp', 'floats', SHIPPED, 'proportional gains', _GAIN_UNITS + 'N/m, N m/rad', size=6,
+          low=0.0),
+    Param('kd', 'floats', SHIPPED, 'derivative gains', _GAIN_UNITS + 'N s/m, N m s/rad',
+          size=6, low=0.0),
+    Param('ki', 'floats', SHIPPED, 'pid only: integral gains (may be left out: zero)',
+          _GAIN_UNITS + 'N/(m s), N m/(rad s)', size=6, low=0.0),
+    Param('integral_limit', 'floats', SHIPPED, 'pid only: bound on abs(ki integral(e)) per DOF, '
+          'the anti-windup clamp (may be left out: zero)', _GAIN_UNITS + 'N, N m', size=6,
+          low=0.0),
+], prefix='gains')
+_ZERO_GAINS = {'ki': (0.0,) * 6, 'integral_limit': (0.0,) * 6}
 
-def _vector(mapping: Mapping[str, Any], key: str, prefix: str, source: str | None,
-            *, size: int = 6, minimum: float = 0.0) -> tuple[float, ...]:
-    name = f'{prefix}.{key}'
-    if key not in mapping:
-        raise ParameterError(name, f'missing; allowed: {size} numbers >= {minimum}',
-                             source=source)
-    value = mapping[key]
-    if (not isinstance(value, (list, tuple)) or len(value) != size
-            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)):
-        raise ParameterError(name, f'got {value!r}; allowed: {size} numbers >= {minimum}',
-                             source=source)
-    out = tuple(float(v) for v in value)
-    if not all(math.isfinite(v) and v >= minimum for v in out):
-        raise ParameterError(name, f'got {value!r}; allowed: {size} finite numbers >= {minimum}',
-                             source=source)
-    return out
+#: ``switching.*``: the rule of the switching baseline (see the module docstring).
+SWITCHING = ParamTable('switching', [
+    Param('hysteresis', 'float', 0.5, "switching only: switch when the other group's error "
+          "exceeds (1 + hysteresis) times the current group's", '-', low=0.0, high=1e6),
+    Param('dwell_time', 'float', 1.0, 'switching only: least time between two switches', 's',
+          low=0.0, high=1e6),
+    Param('position_scale', 'float', 0.05, 'switching only: normalises position errors', 'm',
+          low=0.0, high=1e6, low_open=True),
+    Param('angle_scale', 'float', 0.05, 'switching only: normalises angle errors', 'rad',
+          low=0.0, high=1e6, low_open=True),
+    Param('deadband', 'float', 0.2, 'switching only: normalised error under which no switch '
+          'happens', '-', low=0.0, high=1e6),
+    Param('settle_time', 'float', 0.1, 'switching only: added to the servo travel before '
+          'thrust resumes', 's', low=0.0, high=1e6),
+], prefix='switching')
 
-
-def _number(mapping: Mapping[str, Any], key: str, prefix: str, source: str | None,
-            *, low: float, high: float = math.inf, low_open: bool = False) -> float:
-    name = f'{prefix}.{key}'
-    interval = f"{'(' if low_open else '['}{low}, {high}{']' if math.isfinite(high) else ')'}"
-    if key not in mapping:
-        raise ParameterError(name, f'missing; allowed: {interval}', source=source)
-    value = mapping[key]
-    if not isinstance(value, (int, float)) or isinstance(value, bool):
-        raise ParameterError(name, f'got {value!r}; allowed: a number in {interval}',
-                             source=source)
-    v = float(value)
-    if not (math.isfinite(v) and (v > low if low_open else v >= low) and v <= high):
-        raise ParameterError(name, f'got {value!r}; allowed: {interval}', source=source)
-    return v
+#: ``controller``: the control law.
+CONTROL_LAW = ParamTable('control law', [
+    Param('controller', 'str', 'pd', 'control law: pd (eq. 16), switching (baseline: tilts 0 '
+          'or 90 deg, with tilt_request), pid (pd + g(eta) + clamped integral)',
+          choices=CONTROLLER_KINDS, read_only=True),
+])
 
 
 @dataclass(frozen=True)
@@ -147,26 +151,18 @@ class Gains:
 
     kp: tuple[float, ...]
     kd: tuple[float, ...]
-    ki: tuple[float, ...] = (0.0,) * 6
-    integral_limit: tuple[float, ...] = (0.0,) * 6
+    ki: tuple[float, ...] = _ZERO_GAINS['ki']
+    integral_limit: tuple[float, ...] = _ZERO_GAINS['integral_limit']
 
     @classmethod
-    def from_mapping(cls, values: Mapping[str, Any], *, source: str | None = None,
-                     prefix: str = 'gains') -> Gains:
-        kwargs = {key: _vector(values, key, prefix, source) for key in ('kp', 'kd')}
-        for key in ('ki', 'integral_limit'):
-            if key in values:
-                kwargs[key] = _vector(values, key, prefix, source)
-        unknown = set(values) - {'kp', 'kd', 'ki', 'integral_limit'}
-        if unknown:
-            raise ParameterError(f'{prefix}.{sorted(unknown)[0]}',
-                                 'unknown; known: kp, kd, ki, integral_limit', source=source)
-        return cls(**kwargs)
+    def from_mapping(cls, values: Mapping[str, Any], *, source: str | None = None) -> Gains:
+        """From the ``gains`` block (:data:`GAINS`); ``ki`` and ``integral_limit`` may be absent."""
+        return cls(**GAINS.complete(values, source=source, defaults=_ZERO_GAINS))
 
 
 @dataclass(frozen=True)
 class SwitchingSettings:
-    """Rule of the switching baseline (see the module docstring).
+    """Rule of the switching baseline (see the module docstring; :data:`SWITCHING`).
 
     hysteresis : the other group's error must exceed (1 + hysteresis) times the
         current group's to switch [-]
@@ -176,26 +172,18 @@ class SwitchingSettings:
     settle_time : added to the servo travel time before thrust resumes [s]
     """
 
-    hysteresis: float = 0.5
-    dwell_time: float = 1.0
-    position_scale: float = 0.05
-    angle_scale: float = 0.05
-    deadband: float = 0.2
-    settle_time: float = 0.1
+    hysteresis: float = SWITCHING['hysteresis'].default
+    dwell_time: float = SWITCHING['dwell_time'].default
+    position_scale: float = SWITCHING['position_scale'].default
+    angle_scale: float = SWITCHING['angle_scale'].default
+    deadband: float = SWITCHING['deadband'].default
+    settle_time: float = SWITCHING['settle_time'].default
 
     @classmethod
-    def from_mapping(cls, values: Mapping[str, Any], *, source: str | None = None,
-                     prefix: str = 'switching') -> SwitchingSettings:
-        known = {'hysteresis': (0.0, False), 'dwell_time': (0.0, False),
-                 'position_scale': (0.0, True), 'angle_scale': (0.0, True),
-                 'deadband': (0.0, False), 'settle_time': (0.0, False)}
-        unknown = set(values) - set(known)
-        if unknown:
-            raise ParameterError(f'{prefix}.{sorted(unknown)[0]}',
-                                 f'unknown; known: {sorted(known)}', source=source)
-        kwargs = {key: _number(values, key, prefix, source, low=low, low_open=open_)
-                  for key, (low, open_) in known.items() if key in values}
-        return cls(**kwargs)
+    def from_mapping(cls, values: Mapping[str, Any], *,
+                     source: str | None = None) -> SwitchingSettings:
+        """From the ``switching`` block; absent keys take their defaults."""
+        return cls(**SWITCHING.complete(values, source=source))
 
 
 @dataclass(frozen=True)
@@ -208,19 +196,16 @@ class ControllerConfig:
     source: str | None = field(default=None, compare=False, repr=False)
 
     def with_kind(self, kind: str) -> ControllerConfig:
-        if kind not in CONTROLLER_KINDS:
-            raise ParameterError('controller', f'got {kind!r}; allowed: {CONTROLLER_KINDS}',
-                                 source=self.source)
-        return ControllerConfig(kind, self.gains, self.switching, self.source)  # type: ignore[arg-type]
+        checked = CONTROL_LAW.check('controller', kind, source=self.source)
+        return ControllerConfig(checked, self.gains, self.switching, self.source)
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any], *,
                      source: str | None = None) -> ControllerConfig:
         """From the ``ros__parameters`` of ``wrench_controller`` (other keys ignored)."""
-        kind = values.get('controller', 'pd')
-        if kind not in CONTROLLER_KINDS:
-            raise ParameterError('controller', f'got {kind!r}; allowed: {CONTROLLER_KINDS}',
-                                 source=source)
+        kind = CONTROL_LAW.complete({'controller': values['controller']}
+                                   if 'controller' in values else {},
+                                   source=source)['controller']
         gains = values.get('gains')
         if not isinstance(gains, Mapping):
             raise ParameterError('gains', 'missing; needs kp and kd (6 numbers each)',
@@ -235,18 +220,12 @@ class ControllerConfig:
 
 def load_controller_config(path: str | Path | None = None) -> ControllerConfig:
     """Read ``wrench_controller: ros__parameters:`` from a YAML file (default: shipped)."""
-    if path is None:
-        from tiltrov_ros.paths import config_file
-        path = config_file(CONTROLLER_YAML)
-    source = str(path)
-    with Path(path).open(encoding='utf-8') as stream:
-        document = yaml.safe_load(stream)
-    section = document.get('wrench_controller') if isinstance(document, Mapping) else None
-    params = section.get('ros__parameters') if isinstance(section, Mapping) else None
-    if not isinstance(params, Mapping):
+    path = config_file(CONTROLLER_YAML) if path is None else Path(path)
+    params = ros_parameters(path, node=CONTROLLER_YAML.removesuffix('.yaml'))
+    if params is None:
         raise ParameterError('wrench_controller', 'no wrench_controller: ros__parameters: '
-                             'block found', source=source)
-    return ControllerConfig.from_mapping(params, source=source)
+                             'block found', source=str(path))
+    return ControllerConfig.from_mapping(params, source=str(path))
 
 
 def make_controller(config: ControllerConfig, robot: RobotParams) -> Controller:
@@ -347,7 +326,7 @@ class PIDController:
 class SwitchingController:
     """The selective switching baseline (see the module docstring for the rule)."""
 
-    TILTS: ClassVar[dict[str, tuple[float, float]]] = {
+    MODE_TILTS: ClassVar[dict[str, tuple[float, float]]] = {
         'horizontal': (0.0, 0.0), 'vertical': (0.5 * math.pi, 0.5 * math.pi)}
 
     def __init__(self, gains: Gains, settings: SwitchingSettings, robot: RobotParams) -> None:
@@ -374,7 +353,7 @@ class SwitchingController:
         return h, v
 
     def _switch_to(self, mode: str, t: float) -> None:
-        target = self.TILTS[mode]
+        target = self.MODE_TILTS[mode]
         travel = max(abs(target[0] - self.tilts[0]), abs(target[1] - self.tilts[1]))
         self._moving_until = t + travel / self.robot.tilt_rate_limit + self.settings.settle_time
         self._switched_at = t

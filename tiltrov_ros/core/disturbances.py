@@ -31,8 +31,8 @@ from tiltrov_ros.core.params import RobotParams
 
 FloatArray = NDArray[np.float64]
 
-#: [estimate] The center-of-mass error of robot-parameters.md (true r_g minus
-#: nominal r_g, m): the paper applies such an error but gives no value.
+#: [estimate] The center-of-mass error of the scenarios (true r_g minus nominal
+#: r_g, m): the paper applies such an error but gives no value.
 PAPER_COM_ERROR = (0.01, 0.0, 0.005)
 
 WrenchFn = Callable[[float], ArrayLike]

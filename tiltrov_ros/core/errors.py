@@ -26,8 +26,16 @@ class ParameterError(TiltrovError, ValueError):
         super().__init__(f'parameter {name!r}{where}: {message}')
 
 
+class UnreadableFileError(TiltrovError, ValueError):
+    """A file given or edited by the user cannot be read as YAML (the message names it)."""
+
+
 class ScenarioError(TiltrovError, ValueError):
     """A scenario file or scenario description is invalid."""
+
+
+class CampaignError(TiltrovError, ValueError):
+    """A campaign file is invalid (the message names the file and the key)."""
 
 
 class AllocationError(TiltrovError, ValueError):

@@ -12,7 +12,7 @@ Errors (:func:`control_errors`)
     Euler angles of both quaternions, angle errors wrapped to (-pi, pi]. This is
     the error the controller saw.
 
-Keys of interfaces.md
+The interface's keys (docs/simulation.md)
     ``rms_error[dof]``: sqrt(mean(e^2)) over all ticks.
     ``final_error[dof]``: mean |e| over the ticks of the last
     :data:`FINAL_WINDOW` (10 s) of the run, the run ending at the last plant
@@ -72,14 +72,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tiltrov_ros.core.allocation import infeasible_rows
-from tiltrov_ros.core.controllers import DOF_NAMES
 from tiltrov_ros.core.kinematics import euler_from_quat_rows, ssa
+from tiltrov_ros.core.names import DOF_NAMES, SERVOS, THRUSTERS
 from tiltrov_ros.core.runlog import RunLog
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 
-#: s, the window of ``final_error`` (interfaces.md: the last 10 s).
+#: s, the window of ``final_error`` (the interface's: the last 10 s).
 FINAL_WINDOW = 10.0
 #: s, the window of the oscillation measures.
 OSCILLATION_WINDOW = 20.0
@@ -96,8 +96,6 @@ STAMP_TOLERANCE = 1e-6
 #: s, slack on window edges (stamps are ns; float seconds round).
 _EDGE = 1e-9
 
-SERVOS = ('front', 'rear')
-THRUSTERS = ('thruster_1', 'thruster_2', 'thruster_3', 'thruster_4')
 
 
 @dataclass(frozen=True)
@@ -210,7 +208,7 @@ def compute_metrics(log: RunLog, *, max_thrust: float | None = None) -> dict[str
     Returns
     -------
     dict
-        Keys of interfaces.md first, then the further keys.
+        The interface's keys first, then the further keys.
     """
     limit = max_thrust if max_thrust is not None else log.meta.get('max_thrust')
     limit = float(limit) if isinstance(limit, (int, float)) and limit > 0 else None
@@ -258,7 +256,7 @@ def compute_metrics(log: RunLog, *, max_thrust: float | None = None) -> dict[str
     else:
         metrics['wrench_error_rms'] = None
 
-    # ---- beyond interfaces.md
+    # ---- beyond the interface's keys
     if n:
         settle, band = settling_times(err)
         metrics['max_error'] = _per(DOF_NAMES, np.max(abs_e, axis=0))

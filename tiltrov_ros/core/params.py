@@ -3,8 +3,8 @@
 Values come from the paper's Appendix A (M of (A.2), the quadratic damping of
 (A.4)); everything the paper does not give (geometry, weight and buoyancy,
 centres of gravity and buoyancy, actuator limits) is an engineering estimate,
-marked ``[estimate]`` with its reasoning in the YAML file and in
-``robot-parameters.md``.
+marked ``[estimate]`` with its reasoning in the YAML file. The parameters are
+declared once, in :data:`ROBOT` (and ``control_period`` in :data:`STACK`).
 
 Every construction validates (``__post_init__``), so ``dataclasses.replace`` on a
 valid instance cannot produce an invalid one. A bad value raises
@@ -18,15 +18,15 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 import math
-from numbers import Real
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-import yaml
 
 from tiltrov_ros.core.errors import ParameterError
+from tiltrov_ros.core.paramtable import SHIPPED, Param, ParamTable, ros_parameters
+from tiltrov_ros.paths import config_file
 
 FloatArray = NDArray[np.float64]
 
@@ -35,84 +35,51 @@ PREFIX = 'robot'
 #: Name of the shipped robot file in ``config/``.
 ROBOT_YAML = 'robot.yaml'
 
-_INF = math.inf
+_PI = math.pi
 
+#: ``robot.*``: every value from the shipped ``config/robot.yaml`` (read-only in the nodes).
+ROBOT = ParamTable('robot', [
+    Param('mass_matrix', 'floats', SHIPPED, 'diagonal of M (A.2), rigid body plus added mass',
+          'kg (surge, sway, heave), kg m^2 (roll, pitch, yaw)', size=6, low=0.0,
+          low_open=True, read_only=True, note=' (M must be positive definite)'),
+    Param('quadratic_damping', 'floats', SHIPPED,
+          'quadratic damping d_i of (A.4), D(nu) = diag(d_i abs(nu_i))',
+          'N s^2/m^2, N m s^2', size=6, low=0.0, read_only=True),
+    Param('linear_damping', 'floats', SHIPPED,
+          'linear damping added to (A.4) (the paper has none; may be left out: zero)',
+          'N s/m, N m s', size=6, low=0.0, read_only=True),
+    Param('weight', 'float', SHIPPED, 'W = m g', 'N', low=0.0, low_open=True, read_only=True),
+    Param('buoyancy', 'float', SHIPPED, 'B', 'N', low=0.0, read_only=True),
+    Param('center_of_gravity', 'floats', SHIPPED, 'nominal r_g in base_link_frd '
+          '(the plant adds its com_error)', 'm', size=3, read_only=True),
+    Param('center_of_buoyancy', 'floats', SHIPPED, 'r_b in base_link_frd', 'm', size=3,
+          read_only=True),
+    Param('length', 'float', SHIPPED, 'l of eq. (4), thruster spacing along x', 'm', low=0.0,
+          low_open=True, read_only=True),
+    Param('width', 'float', SHIPPED, 'd of eq. (4), thruster spacing along y', 'm', low=0.0,
+          low_open=True, read_only=True),
+    Param('max_thrust', 'float', SHIPPED, 'thrust limit of each thruster in both directions',
+          'N', low=0.0, low_open=True, read_only=True),
+    Param('thruster_time_constant', 'float', SHIPPED,
+          'first-order thruster time constant (0: the thrust follows the command at once)',
+          's', low=0.0, read_only=True),
+    Param('tilt_min', 'float', SHIPPED, 'lower servo angle limit (below tilt_max)', 'rad',
+          low=-_PI, high=_PI, read_only=True),
+    Param('tilt_max', 'float', SHIPPED, 'upper servo angle limit', 'rad', low=-_PI, high=_PI,
+          read_only=True),
+    Param('tilt_rate_limit', 'float', SHIPPED, 'servo rate limit', 'rad/s', low=0.0,
+          low_open=True, read_only=True),
+], prefix=PREFIX)
 
-@dataclass(frozen=True)
-class _Rule:
-    """Allowed values of one parameter: ``size`` numbers (0: a scalar) in a range."""
+#: The paper's control cycle (Section 4), s; ``control_period`` when a file has none.
+DEFAULT_CONTROL_PERIOD = 0.05
 
-    size: int
-    low: float = -_INF
-    high: float = _INF
-    low_open: bool = False
-    high_open: bool = False
-    note: str = ''
-
-    def range_text(self) -> str:
-        lo = '(' if self.low_open or self.low == -_INF else '['
-        hi = ')' if self.high_open or self.high == _INF else ']'
-        text = f'{lo}{self.low:g}, {self.high:g}{hi}'
-        what = f'{self.size} finite numbers, each in {text}' if self.size else \
-            f'a finite number in {text}'
-        return f'{what}{self.note}'
-
-    def accepts(self, x: float) -> bool:
-        if not math.isfinite(x):
-            return False
-        low_ok = x > self.low if self.low_open else x >= self.low
-        high_ok = x < self.high if self.high_open else x <= self.high
-        return low_ok and high_ok
-
-
-_RULES: dict[str, _Rule] = {
-    'mass_matrix': _Rule(6, 0.0, low_open=True,
-                         note=' (the diagonal of M, which must be positive definite)'),
-    'quadratic_damping': _Rule(6, 0.0),
-    'linear_damping': _Rule(6, 0.0),
-    'weight': _Rule(0, 0.0, low_open=True),
-    'buoyancy': _Rule(0, 0.0),
-    'center_of_gravity': _Rule(3),
-    'center_of_buoyancy': _Rule(3),
-    'length': _Rule(0, 0.0, low_open=True),
-    'width': _Rule(0, 0.0, low_open=True),
-    'max_thrust': _Rule(0, 0.0, low_open=True),
-    'thruster_time_constant': _Rule(0, 0.0, note=' (0: the thrust follows the command at once)'),
-    'tilt_min': _Rule(0, -math.pi, math.pi),
-    'tilt_max': _Rule(0, -math.pi, math.pi),
-    'tilt_rate_limit': _Rule(0, 0.0, low_open=True),
-}
-
-
-def _is_number(x: object) -> bool:
-    return isinstance(x, Real) and not isinstance(x, bool)
-
-
-def _check(name: str, value: object, rule: _Rule, source: str | None) -> float | tuple[float, ...]:
-    """Return ``value`` as a float (or tuple of floats) if ``rule`` allows it, else raise."""
-    full = f'{PREFIX}.{name}'
-
-    def fail() -> ParameterError:
-        shown = value.tolist() if isinstance(value, np.ndarray) else value
-        return ParameterError(full, f'got {shown!r}; allowed: {rule.range_text()}',
-                              source=source)
-
-    if rule.size == 0:
-        if not _is_number(value):
-            raise fail()
-        x = float(value)  # type: ignore[arg-type]
-        if not rule.accepts(x):
-            raise fail()
-        return x
-    if isinstance(value, str | bytes | Mapping) or not hasattr(value, '__len__'):
-        raise fail()
-    items = list(value)  # type: ignore[call-overload]
-    if len(items) != rule.size or not all(_is_number(v) for v in items):
-        raise fail()
-    out = tuple(float(v) for v in items)
-    if not all(rule.accepts(v) for v in out):
-        raise fail()
-    return out
+#: ``control_period``, next to ``robot`` in ``config/robot.yaml`` (``/**``).
+STACK = ParamTable('control period', [
+    Param('control_period', 'float', SHIPPED, 'control period T of the stack (a multiple of '
+          'the plant step); control ticks are the sim times that are multiples of T', 's',
+          low=0.0, high=60.0, low_open=True, read_only=True),
+])
 
 
 @dataclass(frozen=True)
@@ -167,8 +134,9 @@ class RobotParams:
     source: str | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
-        for name, rule in _RULES.items():
-            object.__setattr__(self, name, _check(name, getattr(self, name), rule, self.source))
+        for param in ROBOT:
+            object.__setattr__(self, param.name, ROBOT.check(
+                param.name, getattr(self, param.name), source=self.source))
         if not self.tilt_min < self.tilt_max:
             raise ParameterError(
                 f'{PREFIX}.tilt_min', f'got {self.tilt_min!r} with tilt_max = {self.tilt_max!r}; '
@@ -209,19 +177,9 @@ class RobotParams:
         silently fall back to something else). ``linear_damping`` may be omitted
         (zero).
         """
-        known = [f.name for f in fields(cls) if f.name != 'source']
-        for key in values:
-            if key not in known:
-                raise ParameterError(f'{PREFIX}.{key}', f'unknown parameter; known: {known}',
-                                     source=source)
-        kwargs = dict(values)
-        kwargs.setdefault('linear_damping', (0.0,) * 6)
-        for key in known:
-            if key not in kwargs:
-                raise ParameterError(f'{PREFIX}.{key}',
-                                     f'missing; allowed: {_RULES[key].range_text()}',
-                                     source=source)
-        return cls(**kwargs, source=source)
+        checked = ROBOT.complete(values, source=source,
+                                 defaults={'linear_damping': (0.0,) * 6})
+        return cls(**checked, source=source)
 
 
 def load_robot_params(path: str | Path | None = None) -> RobotParams:
@@ -236,24 +194,13 @@ def load_robot_params(path: str | Path | None = None) -> RobotParams:
         If the file has no ``robot`` block or a value is invalid (the message
         names the file).
     """
-    if path is None:
-        from tiltrov_ros.paths import config_file
-        path = config_file(ROBOT_YAML)
-    path = Path(path)
+    path = config_file(ROBOT_YAML) if path is None else Path(path)
     source = str(path)
-    with path.open(encoding='utf-8') as stream:
-        document = yaml.safe_load(stream)
-    if isinstance(document, Mapping):
-        for section in document.values():
-            ros_params = section.get('ros__parameters') if isinstance(section, Mapping) else None
-            if isinstance(ros_params, Mapping) and isinstance(ros_params.get(PREFIX), Mapping):
-                return RobotParams.from_mapping(ros_params[PREFIX], source=source)
-    raise ParameterError(PREFIX, 'no <node>: ros__parameters: robot: block found',
-                         source=source)
-
-
-#: The paper's control cycle (Section 4), s; the default of ``control_period``.
-DEFAULT_CONTROL_PERIOD = 0.05
+    params = ros_parameters(path, having=PREFIX)
+    if params is None or not isinstance(params[PREFIX], Mapping):
+        raise ParameterError(PREFIX, 'no <node>: ros__parameters: robot: block found',
+                             source=source)
+    return RobotParams.from_mapping(params[PREFIX], source=source)
 
 
 def load_control_period(path: str | Path | None = None) -> float:
@@ -262,21 +209,7 @@ def load_control_period(path: str | Path | None = None) -> float:
     It sits next to the ``robot`` block in ``/**: ros__parameters:``, so every
     node reads the same value; absent, it is the paper's 50 ms.
     """
-    if path is None:
-        from tiltrov_ros.paths import config_file
-        path = config_file(ROBOT_YAML)
-    source = str(path)
-    with Path(path).open(encoding='utf-8') as stream:
-        document = yaml.safe_load(stream)
-    value: Any = DEFAULT_CONTROL_PERIOD
-    if isinstance(document, Mapping):
-        for section in document.values():
-            ros_params = section.get('ros__parameters') if isinstance(section, Mapping) else None
-            if isinstance(ros_params, Mapping) and 'control_period' in ros_params:
-                value = ros_params['control_period']
-                break
-    if (isinstance(value, bool) or not isinstance(value, (int, float))
-            or not math.isfinite(value) or value <= 0):
-        raise ParameterError('control_period', f'got {value!r}; allowed: a number of '
-                             'seconds > 0', source=source)
-    return float(value)
+    path = config_file(ROBOT_YAML) if path is None else Path(path)
+    params = ros_parameters(path, having='control_period')
+    value = params['control_period'] if params is not None else DEFAULT_CONTROL_PERIOD
+    return float(STACK.check('control_period', value, source=str(path)))

@@ -25,7 +25,7 @@ A scenario file (``config/scenarios/<name>.yaml``, or any path) is plain YAML::
       nu: [0, 0, 0, 0, 0, 0]          # body velocity
     robot:                            # overrides of config/robot.yaml
       tilt_rate_limit: 1.0471975511965976
-    faults:                           # actuator faults (README.md, "Reliability")
+    faults:                           # actuator faults (docs/reliability.md)
       - {thruster: 2, at: 20.0, detected_after: 0.0}   # thruster_2 gives no thrust from
                                       # 20 s; the allocator knows from 20 s + detected_after
 
@@ -44,8 +44,8 @@ The reference gives eta_d and its exact time derivative (the feed-forward of
 quaternion. At the instant of a kink the rate is a one-sided derivative: a
 ramp's rate is 0 at its start and at its end (the rate of the held pieces), a
 sine's is its own rate at ``start`` and ``end``; a step's jump contributes no
-rate. (Which side is taken matters more than it seems: see README.md, "Known
-limitations", on the allocator holding both pairs at the +-90 deg edge.)
+rate. (Which side is taken matters more than it seems: see
+docs/limitations.md on the allocator holding both pairs at the +-90 deg edge.)
 """
 
 from __future__ import annotations
@@ -58,13 +58,15 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-import yaml
 
-from tiltrov_ros.core.controllers import DOF_NAMES, Reference
+from tiltrov_ros.core.controllers import Reference
 from tiltrov_ros.core.disturbances import Disturbances
-from tiltrov_ros.core.errors import ParameterError, ScenarioError
+from tiltrov_ros.core.errors import ParameterError, ScenarioError, UnreadableFileError
 from tiltrov_ros.core.kinematics import quat_from_euler
+from tiltrov_ros.core.names import DOF_NAMES
 from tiltrov_ros.core.params import RobotParams
+from tiltrov_ros.core.yamlfile import read_yaml
+from tiltrov_ros.paths import scenario_dir
 
 FloatArray = NDArray[np.float64]
 
@@ -76,6 +78,8 @@ _TERM_KEYS: dict[str, tuple[set[str], set[str]]] = {
     'sine': ({'amplitude', 'omega'}, {'phase', 'start', 'end'}),
     'step': ({'value', 'at'}, set()),
 }
+#: Term keys that carry the DOF's unit (scaled deg -> rad for angles with ``angle_unit: deg``).
+TERM_UNIT_KEYS = frozenset({'value', 'from', 'to', 'amplitude'})
 
 
 @dataclass(frozen=True)
@@ -204,29 +208,33 @@ class Scenario:
 
 def scenario_names() -> list[str]:
     """Names of the shipped scenarios (``config/scenarios/*.yaml``)."""
-    from tiltrov_ros.paths import scenario_dir
     return sorted(p.stem for p in scenario_dir().glob('*.yaml'))
 
 
 def load_scenario(name_or_path: str | Path) -> Scenario:
     """A shipped scenario by name (``pitch_hold``) or any scenario file by path."""
+    doc, path = load_scenario_document(name_or_path)
+    return _parse(doc, str(path))
+
+
+def load_scenario_document(name_or_path: str | Path) -> tuple[Mapping[str, Any], Path]:
+    """The YAML mapping of a scenario (shipped name or path), not yet validated, and its
+    file. :func:`load_scenario` parses it; campaigns build samples on it."""
     path = Path(name_or_path)
     if not path.suffix:
-        from tiltrov_ros.paths import scenario_dir
         path = scenario_dir() / f'{name_or_path}.yaml'
         if not path.is_file():
             raise ScenarioError(f'no scenario named {str(name_or_path)!r}; shipped: '
                                 f'{", ".join(scenario_names())}; or give a path to a .yaml file')
     if not path.is_file():
         raise ScenarioError(f'scenario file not found: {path}')
-    with path.open(encoding='utf-8') as stream:
-        try:
-            doc = yaml.safe_load(stream)
-        except yaml.YAMLError as exc:
-            raise ScenarioError(f'{path}: not valid YAML: {exc}') from exc
+    try:
+        doc = read_yaml(path)
+    except UnreadableFileError as exc:
+        raise ScenarioError(str(exc)) from None
     if not isinstance(doc, Mapping):
         raise ScenarioError(f'{path}: a scenario is a YAML mapping')
-    return _parse(doc, str(path))
+    return doc, path
 
 
 # --------------------------------------------------------------------------- parsing
@@ -271,13 +279,11 @@ def _term(doc: Any, scale: float, source: str | None, where: str) -> Term:
     missing = required - set(doc)
     if missing:
         raise _fail(source, where, f'{kind} term needs {sorted(missing)[0]!r}')
-    # Values carrying the DOF's unit are scaled (deg -> rad for angles).
-    scaled = {'value', 'from', 'to', 'amplitude'}
     params = []
     for key in sorted(required | optional):
         if key in doc:
             v = _float(doc[key], source, f'{where}.{key}')
-            params.append((key, v * scale if key in scaled else v))
+            params.append((key, v * scale if key in TERM_UNIT_KEYS else v))
     out = Term(kind, tuple(params))
     if kind == 'ramp' and out._p('duration') <= 0:
         raise _fail(source, f'{where}.duration', 'must be > 0 s')

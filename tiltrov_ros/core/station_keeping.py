@@ -29,8 +29,8 @@ from typing import Any
 
 import numpy as np
 
-from tiltrov_ros.core.controllers import DOF_NAMES
 from tiltrov_ros.core.metrics import compute_metrics
+from tiltrov_ros.core.names import DOF_NAMES
 from tiltrov_ros.core.runlog import RunLog
 from tiltrov_ros.core.runner import run, stack_config
 from tiltrov_ros.core.scenarios import Scenario

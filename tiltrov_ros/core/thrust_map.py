@@ -1,6 +1,6 @@
 """The thrust map of the tilting-thruster robot: eq. (4) and its linear form (5).
 
-Geometry (``../shared/notes/interfaces.md``; checked against r_i x F_i by a test):
+Geometry (the joints of :mod:`tiltrov_ros.core.names`; checked against r_i x F_i by a test):
 
 ========== ======================== ================================
 joint      position in base_link_frd horizontal direction at tilt 0
@@ -24,9 +24,6 @@ from numpy.typing import ArrayLike, NDArray
 FloatArray = NDArray[np.float64]
 
 SQRT1_2 = np.sqrt(0.5)
-
-THRUSTER_NAMES = ('thruster_1', 'thruster_2', 'thruster_3', 'thruster_4')
-TILT_NAMES = ('tilt_front', 'tilt_rear')
 
 # Sign of the y component of each thruster's horizontal direction (x is always +).
 _HORIZONTAL_Y_SIGN = np.array([1.0, -1.0, 1.0, -1.0])

@@ -4,7 +4,7 @@ Pure functions on plain values (no rclpy): the nodes take the fields out of a
 message and call these. An input check raises :class:`InvalidInput` with a
 short machine-readable ``reason`` (one of :data:`REASONS`, the key under which
 ``/diagnostics`` counts it) and a sentence for the log; the node rejects the
-message (README.md, "Reliability").
+message (docs/reliability.md).
 
 Stamps are integer nanoseconds. The bounds are relative to the receiving
 node's clock (sim time when the node runs on ``/clock``, the plant's own sim
@@ -20,8 +20,9 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 import math
 
-from tiltrov_ros.core.errors import ParameterError, TiltrovError
-from tiltrov_ros.core.timebase import NS_PER_S
+from tiltrov_ros.core.errors import TiltrovError
+from tiltrov_ros.core.paramtable import Param, ParamTable
+from tiltrov_ros.core.timebase import NS_PER_S, format_ns, stamp_to_ns, to_ns
 
 NON_FINITE = 'non_finite'          # NaN or infinity in a value the node uses
 WRONG_LENGTH = 'wrong_length'      # a JointState array neither empty nor one per name
@@ -33,10 +34,11 @@ BAD_QUATERNION = 'bad_quaternion'  # norm not within QUATERNION_TOLERANCE of 1
 BAD_STAMP = 'bad_stamp'            # negative time or nanosec >= 1e9
 FUTURE_STAMP = 'future_stamp'      # more than max_future ahead of the node's clock
 OLD_STAMP = 'old_stamp'            # more than max_age behind the node's clock
+MALFORMED = 'malformed'            # bytes that do not decode as the topic's type (cut CDR)
 
 #: Every rejection reason, as counted on /diagnostics.
 REASONS = (NON_FINITE, WRONG_LENGTH, UNKNOWN_JOINT, MISSING_JOINT, DUPLICATE_JOINT,
-           WRONG_FRAME, BAD_QUATERNION, BAD_STAMP, FUTURE_STAMP, OLD_STAMP)
+           WRONG_FRAME, BAD_QUATERNION, BAD_STAMP, FUTURE_STAMP, OLD_STAMP, MALFORMED)
 #: Reasons that concern the stamp itself: a node never answers with such a stamp.
 STAMP_REASONS = (BAD_STAMP, FUTURE_STAMP, OLD_STAMP)
 
@@ -73,35 +75,44 @@ class StampBounds:
 
     @classmethod
     def from_seconds(cls, max_future: float, max_age: float) -> StampBounds:
-        return cls(round(max_future * NS_PER_S), round(max_age * NS_PER_S))
+        return cls(to_ns(max_future), to_ns(max_age))
 
 
-def _text(ns: int) -> str:
-    return f'{ns / NS_PER_S:.3f} s'
-
-
-def stamp_ns(sec: int, nanosec: int) -> int:
+def checked_stamp_ns(sec: int, nanosec: int) -> int:
     """Integer ns of a ``builtin_interfaces/Time``; :data:`BAD_STAMP` if malformed."""
     if sec < 0 or not 0 <= nanosec < NS_PER_S:
         raise InvalidInput(BAD_STAMP, f'stamp sec={sec} nanosec={nanosec} is not a time '
                                       '(sec >= 0, 0 <= nanosec < 1e9)')
-    return int(sec) * NS_PER_S + int(nanosec)
+    return stamp_to_ns(sec, nanosec)
 
 
 def check_stamp(sec: int, nanosec: int, now_ns: int | None, bounds: StampBounds) -> int:
     """The stamp in ns, checked against the node's clock ``now_ns`` (None: unknown)."""
-    ns = stamp_ns(sec, nanosec)
+    ns = checked_stamp_ns(sec, nanosec)
     if now_ns is None:
         return ns
     if bounds.max_future_ns and ns - now_ns > bounds.max_future_ns:
-        raise InvalidInput(FUTURE_STAMP, f'stamp {_text(ns)} is {_text(ns - now_ns)} ahead of '
-                                         f'the node\'s clock ({_text(now_ns)}; allowed: '
-                                         f'{_text(bounds.max_future_ns)}, stamp_max_future)')
+        raise InvalidInput(FUTURE_STAMP, f'stamp {format_ns(ns)} is {format_ns(ns - now_ns)} '
+                                         f'ahead of the node\'s clock ({format_ns(now_ns)}; '
+                                         f'allowed: {format_ns(bounds.max_future_ns)}, '
+                                         'stamp_max_future)')
     if bounds.max_age_ns and now_ns - ns > bounds.max_age_ns:
-        raise InvalidInput(OLD_STAMP, f'stamp {_text(ns)} is {_text(now_ns - ns)} behind the '
-                                      f'node\'s clock ({_text(now_ns)}; allowed: '
-                                      f'{_text(bounds.max_age_ns)}, stamp_max_age)')
+        raise InvalidInput(OLD_STAMP, f'stamp {format_ns(ns)} is {format_ns(now_ns - ns)} '
+                                      f'behind the node\'s clock ({format_ns(now_ns)}; '
+                                      f'allowed: {format_ns(bounds.max_age_ns)}, stamp_max_age)')
     return ns
+
+
+def check_answerable(ns: int, state_ns: int, step_ns: int) -> None:
+    """A command stamped ``ns`` must answer a state already published: the plant's,
+    stamped ``state_ns`` at the latest. One plant step ``step_ns`` later is allowed (a
+    watchdog's answer, stamped just after its node's clock); anything later is a
+    command for a time that has not come, which would stand in for the real answers
+    (rejected: ``future_stamp``, whatever ``stamp_max_future`` allows)."""
+    if ns - state_ns > step_ns:
+        raise InvalidInput(FUTURE_STAMP, f'stamp {format_ns(ns)} is after the latest state '
+                                         f'({format_ns(state_ns)}): no state it can answer has '
+                                         'been published')
 
 
 def is_stale(stamp: int, now_ns: int | None, timeout_ns: int) -> bool:
@@ -113,9 +124,21 @@ def is_stale(stamp: int, now_ns: int | None, timeout_ns: int) -> bool:
     return now_ns is not None and timeout_ns > 0 and now_ns - stamp > timeout_ns
 
 
+#: Characters of a string from a message shown in a log line or an error.
+MAX_SHOWN = 64
+
+
+def shown(text: str, limit: int = MAX_SHOWN) -> str:
+    """``repr(text)``, cut to ``limit`` characters with the length said: strings from
+    messages reach the logs only through this (a 1 MB frame_id must not)."""
+    if len(text) <= limit:
+        return repr(text)
+    return f'{text[:limit]!r}... ({len(text)} characters)'
+
+
 def check_frame(frame_id: str, expected: str, field: str = 'frame_id') -> None:
     if frame_id != expected:
-        raise InvalidInput(WRONG_FRAME, f'{field} {frame_id!r}; expected {expected!r}')
+        raise InvalidInput(WRONG_FRAME, f'{field} {shown(frame_id)}; expected {expected!r}')
 
 
 def check_finite(values: Iterable[float], what: str) -> None:
@@ -147,10 +170,10 @@ def joint_values(names: Sequence[str], arrays: dict[str, Sequence[float]],
     seen: set[str] = set()
     for name in names:
         if name in seen:
-            raise InvalidInput(DUPLICATE_JOINT, f'joint {name!r} appears twice')
+            raise InvalidInput(DUPLICATE_JOINT, f'joint {shown(name)} appears twice')
         seen.add(name)
         if name not in permitted:
-            raise InvalidInput(UNKNOWN_JOINT, f'unknown joint {name!r}; allowed: '
+            raise InvalidInput(UNKNOWN_JOINT, f'unknown joint {shown(name)}; allowed: '
                                               f'{", ".join(sorted(permitted))}')
     missing = [name for name in required if name not in seen]
     if missing:
@@ -193,19 +216,20 @@ def limit_command(thrusts: Sequence[float], tilts: Sequence[float], max_thrust: 
     return out_f, out_a
 
 
-def failed_thruster_indices(value: object, name: str = 'failed_thrusters') -> tuple[int, ...]:
-    """Core indices 0..3 of a ``failed_thrusters`` value: thruster numbers 1..4
-    (thruster_1..thruster_4), or empty. Raises ParameterError naming ``name``."""
+#: ``failed_thrusters`` (plant and allocator nodes): the thrusters that give no thrust.
+FAILED_THRUSTERS = ParamTable('failed thrusters', [
+    Param('failed_thrusters', 'ints', [], 'thrusters that give no thrust, by number: '
+          '1..4 = thruster_1..thruster_4 (e.g. [2])', low=1, high=4, distinct=True,
+          note=' (thruster numbers; [] for none)'),
+])
+
+
+def failed_thruster_indices(value: object) -> tuple[int, ...]:
+    """Core indices 0..3 of a ``failed_thrusters`` value (:data:`FAILED_THRUSTERS`):
+    thruster numbers 1..4 (thruster_1..thruster_4), or empty. Raises ParameterError."""
     if value is None:
         return ()
-    if isinstance(value, (str, bytes)) or not isinstance(value, Iterable):
-        raise ParameterError(name, f'got {value!r}; allowed: a list of thruster numbers '
-                                   '1..4 (thruster_1..thruster_4), [] for none')
-    numbers = list(value)
-    if not all(isinstance(n, int) and not isinstance(n, bool) and 1 <= n <= 4
-               for n in numbers) or len(set(numbers)) != len(numbers):
-        raise ParameterError(name, f'got {numbers!r}; allowed: distinct thruster numbers '
-                                   '1..4 (thruster_1..thruster_4), [] for none')
+    numbers = FAILED_THRUSTERS.check('failed_thrusters', value)
     return tuple(sorted(n - 1 for n in numbers))
 
 

@@ -3,14 +3,14 @@
 The serialized CDR bytes each subscription receives are written untouched
 (raw subscriptions, no deserialization), with the publishers' QoS in the
 metadata and the message definitions as ``ros2msg`` schemas, so ``ros2 bag``,
-rosbags, the mcap library and Foxglove open the bag. See README.md, "Bags".
+rosbags, the mcap library and Foxglove open the bag. See docs/bags.md.
 
 Design points:
 
 * Throughput: each callback, after the message the executor took, takes the
   messages already queued on the same subscription (up to ``_DRAIN_LIMIT``),
   which keeps the executor's per-message overhead off the hot path.
-* The stack's topics (:data:`~tiltrov_ros.bag.topics.STACK_TOPICS`) are
+* The stack's topics (:data:`~tiltrov_ros.core.names.STACK_TOPICS`) are
   subscribed at start-up, before their publishers exist, so the first message
   of a run is recorded; other topics are found by polling the graph every
   ``discovery_period`` seconds.
@@ -34,14 +34,11 @@ from datetime import datetime
 import functools
 import json
 import signal
-import struct
 import sys
 import time
 from typing import Any
 
-from rcl_interfaces.msg import (
-    SetParametersResult,
-)
+from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
@@ -56,28 +53,26 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.subscription import Subscription
 from rosbags.interfaces import Connection
 
-from .. import __version__
-from ..bag.bagfile import RUN_INFO_KEY, parse_run_info
-from ..bag.msgdefs import message_class, message_definition
-from ..bag.qos import matches, subscription_qos, to_bag_qos
-from ..bag.topics import CLOCK_TOPIC, STACK_TOPICS, is_hidden, normalize_type
-from ..bag.writer import COMPRESSIONS, BagWriter
-from ..core.errors import BagError, ParameterError, TiltrovError
-from .common import descriptor
+from tiltrov_ros import __version__
+from tiltrov_ros.bag.bagfile import RUN_INFO_KEY, parse_run_info
+from tiltrov_ros.bag.losses import RECORDER_KEY
+from tiltrov_ros.bag.msgdefs import message_class, message_definition
+from tiltrov_ros.bag.qos import matches, subscription_qos, to_bag_qos
+from tiltrov_ros.bag.topics import is_hidden, normalize_type
+from tiltrov_ros.bag.writer import COMPRESSIONS, BagWriter
+from tiltrov_ros.core.errors import BagError, ParameterError, TiltrovError
+from tiltrov_ros.core.names import CLOCK, RECORDER, STACK_TOPICS
+from tiltrov_ros.core.paramtable import UNSET, Param, ParamTable
+from tiltrov_ros.core.timebase import cdr_stamp
+from tiltrov_ros.core.validation import InvalidInput, checked_stamp_ns
 
-NODE_NAME = 'bag_recorder'
+from .base import TiltrovNode
+from .executors import init
+from .parameters import Overrides, check, declare
+
 VERSION_KEY = 'tiltrov.version'
 _DRAIN_LIMIT = 1000       # messages taken per callback, for fairness between topics
 _THROTTLE = 5.0           # s, for repeated warnings from callbacks
-
-
-def clock_ns(data: bytes) -> int:
-    """Sim time (ns) carried by a serialized ``rosgraph_msgs/Clock``."""
-    if len(data) < 12:
-        raise BagError(f'/clock message of {len(data)} bytes')
-    fmt = '<iI' if data[1] == 1 else '>iI'  # CDR encapsulation 0x0001 = little endian
-    sec, nanosec = struct.unpack_from(fmt, data, 4)
-    return int(sec) * 1_000_000_000 + int(nanosec)
 
 
 @dataclass(frozen=True)
@@ -95,8 +90,29 @@ class RecorderConfig:
     run_info: str
 
 
-#: The recorder's parameters are read-only unless declared otherwise.
-_descriptor = functools.partial(descriptor, read_only=True)
+#: The recorder's parameters (read-only but run_info, which may be set while recording).
+RECORDER_PARAMS = ParamTable('bag_recorder', [
+    Param('output', 'str', '', 'bag directory to create (must not exist); empty: '
+          'rosbag2_YYYY_MM_DD-HH_MM_SS in the working directory', read_only=True),
+    # String arrays are declared without a default: an empty YAML list reads as unset.
+    Param('topics', 'strs', UNSET, 'topics to record (relative names resolve in the node '
+          'namespace); unset or empty: every topic', read_only=True),
+    Param('exclude_topics', 'strs', UNSET, 'topics never recorded when recording every topic',
+          read_only=True),
+    Param('include_hidden', 'bool', False, 'when recording every topic, also record hidden '
+          'topics (a name token starting with _)', read_only=True),
+    Param('compression', 'str', 'none', 'MCAP chunk compression', choices=COMPRESSIONS,
+          read_only=True),
+    Param('queue_depth', 'int', 10000, 'history depth of each subscription; 0: KEEP_ALL',
+          low=0, high=1_000_000, read_only=True),
+    Param('discovery_period', 'float', 0.5, 'seconds (wall clock) between polls of the ROS '
+          'graph for new topics', 's', low=0.05, high=60.0, read_only=True),
+    Param('flush_period', 'float', 1.0, 'seconds (wall clock) between writes of the pending '
+          'MCAP chunk to disk, which bounds what a killed recorder loses; 0: only when a chunk '
+          'is full (1 MiB)', 's', low=0.0, high=3600.0, read_only=True),
+    Param('run_info', 'str', '{}', 'JSON object describing the run (scenario, controller, '
+          'robot limits, ...), stored in the bag metadata as custom_data "tiltrov.run_info"'),
+])
 
 
 def declare_parameters(node: Node) -> RecorderConfig:
@@ -107,45 +123,16 @@ def declare_parameters(node: Node) -> RecorderConfig:
             by rclpy's descriptors at declaration).
 
     """
-    d = node.declare_parameter
-    output = d('output', '', _descriptor(
-        'bag directory to create (must not exist); empty: rosbag2_YYYY_MM_DD-HH_MM_SS '
-        'in the working directory')).value
-    # String arrays are declared without a default: an empty YAML list reads as unset.
-    topics = d('topics', Parameter.Type.STRING_ARRAY, _descriptor(
-        'topics to record (relative names resolve in the node namespace); '
-        'unset or empty: every topic')).value or []
-    exclude = d('exclude_topics', Parameter.Type.STRING_ARRAY, _descriptor(
-        'topics never recorded when recording every topic')).value or []
-    include_hidden = d('include_hidden', False, _descriptor(
-        'when recording every topic, also record hidden topics (a name token '
-        'starting with _)')).value
-    compression = d('compression', 'none', _descriptor(
-        'MCAP chunk compression', constraints='none or zstd')).value
-    depth = d('queue_depth', 10000, _descriptor(
-        'history depth of each subscription; 0: KEEP_ALL', integer=(0, 1_000_000))).value
-    discovery = d('discovery_period', 0.5, _descriptor(
-        'seconds (wall clock) between polls of the ROS graph for new topics',
-        floating=(0.05, 60.0))).value
-    flush = d('flush_period', 1.0, _descriptor(
-        'seconds (wall clock) between writes of the pending MCAP chunk to disk, which '
-        'bounds what a killed recorder loses; 0: only when a chunk is full (1 MiB)',
-        floating=(0.0, 3600.0))).value
-    run_info = d('run_info', '{}', _descriptor(
-        'JSON object describing the run (scenario, controller, robot limits, ...), '
-        'stored in the bag metadata as custom_data "tiltrov.run_info"',
-        read_only=False)).value
-    if compression not in COMPRESSIONS:
-        raise ParameterError('compression', f'{compression!r} is not one of {COMPRESSIONS}')
+    v = check(RECORDER_PARAMS, declare(node, RECORDER_PARAMS))
     try:
-        parse_run_info(run_info)
+        parse_run_info(v['run_info'])
     except BagError as exc:
         raise ParameterError('run_info', str(exc)) from None
     return RecorderConfig(
-        output=output, topics=tuple(topics), exclude_topics=tuple(exclude),
-        include_hidden=bool(include_hidden), compression=compression,
-        queue_depth=int(depth), discovery_period=float(discovery),
-        flush_period=float(flush), run_info=run_info)
+        output=v['output'], topics=v['topics'] or (), exclude_topics=v['exclude_topics'] or (),
+        include_hidden=v['include_hidden'], compression=v['compression'],
+        queue_depth=v['queue_depth'], discovery_period=v['discovery_period'],
+        flush_period=v['flush_period'], run_info=v['run_info'])
 
 
 @dataclass
@@ -179,28 +166,27 @@ class _Topic:
     warned: set[str] = field(default_factory=set)
 
 
-class BagRecorder(Node):
+class BagRecorder(TiltrovNode):
     """Records topics into a rosbag2/MCAP bag (see the module docstring).
 
-    Args:
-        params: parameter values (``{'output': 'runs/x', 'run_info': '{...}'}``),
-            applied as overrides on top of ``cli_args``/parameter files.
-        node_name, namespace, context, cli_args: as for :class:`rclpy.node.Node`.
+    Constructed as every node of the package (:class:`~tiltrov_ros.nodes.base.TiltrovNode`:
+    ``node_name``, ``namespace``, ``context``, ``cli_args``, ``parameter_overrides``,
+    e.g. ``{'output': 'runs/x', 'run_info': '{...}'}``, which win over parameter
+    files). It publishes no /diagnostics and never waits for itself.
 
     Raises:
-        ParameterError, rclpy ParameterException: invalid parameters.
+        ParameterError: invalid parameters.
         BagError: the output directory exists or cannot be created.
 
     """
 
-    def __init__(self, *, params: Mapping[str, Any] | None = None,
-                 node_name: str = NODE_NAME, namespace: str | None = None,
-                 context: Context | None = None,
-                 cli_args: Sequence[str] | None = None) -> None:
-        overrides = [Parameter(name, value=value) for name, value in (params or {}).items()]
-        super().__init__(node_name, namespace=namespace, context=context,
-                         cli_args=list(cli_args) if cli_args is not None else None,
-                         parameter_overrides=overrides)
+    stack_node = False
+
+    def __init__(self, *, node_name: str = RECORDER, namespace: str | None = None,
+                 context: Context | None = None, cli_args: Sequence[str] | None = None,
+                 parameter_overrides: Overrides = None) -> None:
+        super().__init__(node_name, namespace=namespace, context=context, cli_args=cli_args,
+                         parameter_overrides=parameter_overrides)
         self.config = declare_parameters(self)
         output = self.config.output or datetime.now().strftime('rosbag2_%Y_%m_%d-%H_%M_%S')
         self._bag = BagWriter(output, compression=self.config.compression, custom_data={
@@ -208,10 +194,12 @@ class BagRecorder(Node):
         self.output = self._bag.path
         self._use_sim_time = bool(self.get_parameter('use_sim_time').value)
         self._clock_ns = 0
+        self._bad_clock = 0         # /clock samples that were not a time
         self._clock_topic: _Topic | None = None
         self._topics: dict[str, _Topic] = {}
         self._skipped: set[str] = set()
         self._errors = 0
+        self._first_error = ''
         self._closed = False
         # bound for draining a whole queue (a queue never holds more than its depth)
         self._queue_limit = self.config.queue_depth or 1_000_000
@@ -230,7 +218,7 @@ class BagRecorder(Node):
                 message_definition(msgtype)
                 self._subscribe(name, msgtype, [])
         if self._use_sim_time and self._clock_topic is None:
-            self._subscribe(CLOCK_TOPIC, STACK_TOPICS[CLOCK_TOPIC], [], record=False)
+            self._subscribe(CLOCK, STACK_TOPICS[CLOCK], [], record=False)
 
         wall = Clock(clock_type=ClockType.STEADY_TIME)
         self._discover()
@@ -262,7 +250,7 @@ class BagRecorder(Node):
                 self.get_logger().warning(f'not recording {name}: {exc}')
             return
         qos = subscription_qos([p.qos_profile for p in publishers], self.config.queue_depth)
-        if name == CLOCK_TOPIC and not record:
+        if name == CLOCK and not record:
             qos.reliability = ReliabilityPolicy.BEST_EFFORT  # time only: match any /clock
         topic = self._topics.get(name)
         if topic is None:
@@ -279,7 +267,7 @@ class BagRecorder(Node):
         topic.sub = self.create_subscription(
             msg_class, name, functools.partial(self._on_message, topic), qos,
             raw=True, event_callbacks=events)
-        if name == CLOCK_TOPIC and self._use_sim_time:
+        if name == CLOCK and self._use_sim_time:
             self._clock_topic = topic
 
     def _discover(self) -> None:
@@ -320,9 +308,14 @@ class BagRecorder(Node):
             self._record(topic, data, info)
             self._drain(topic, limit=_DRAIN_LIMIT)
         except Exception as exc:
-            self._errors += 1
-            self.get_logger().error(f'cannot record a message of {topic.name}: {exc}',
-                                    throttle_duration_sec=_THROTTLE)
+            self._write_error(f'cannot record a message of {topic.name}: {exc}')
+
+    def _write_error(self, text: str) -> None:
+        """Count and log (throttled) a message or chunk that could not be written."""
+        self._errors += 1
+        self._first_error = self._first_error or text
+        self.get_logger().error(f'{text} ({self._errors} error(s) so far)',
+                                throttle_duration_sec=_THROTTLE)
 
     def _drain(self, topic: _Topic, limit: int) -> None:
         """Take and record messages already queued on ``topic``'s subscription."""
@@ -344,7 +337,7 @@ class BagRecorder(Node):
             return
         topic.received += 1
         if topic is self._clock_topic:
-            self._clock_ns = clock_ns(data)
+            self._take_clock(data)
             log_time = self._clock_ns
         elif self._clock_topic is not None:
             self._drain(self._clock_topic, limit=_DRAIN_LIMIT)  # /clock before later data
@@ -357,6 +350,19 @@ class BagRecorder(Node):
             topic.connection = self._add_connection(topic)
         if self._bag.write(topic.connection, log_time, data):
             self._log_flushed()
+
+    def _take_clock(self, data: bytes) -> None:
+        """Log time from a /clock sample: a malformed one (no stamp, ``sec < 0``,
+        ``nanosec >= 1e9``) is recorded as it came but leaves the log time at the
+        last good sample (counted, logged); a sample earlier than the last moves
+        the log time back with it (time starts over: nodes/simclock.py)."""
+        try:
+            self._clock_ns = checked_stamp_ns(*cdr_stamp(data))
+        except (InvalidInput, ValueError) as exc:
+            self._bad_clock += 1
+            self.get_logger().warning(
+                f'/clock sample not a time ({exc}; {self._bad_clock} so far): logged at the '
+                'last good one', throttle_duration_sec=_THROTTLE)
 
     def _add_connection(self, topic: _Topic) -> Connection:
         """The topic's bag connection, with its publishers' QoS (from the graph now,
@@ -382,9 +388,7 @@ class BagRecorder(Node):
             if not self._closed and self._bag.flush():
                 self._log_flushed()
         except Exception as exc:
-            self._errors += 1
-            self.get_logger().error(f'cannot flush {self.output}: {exc}',
-                                    throttle_duration_sec=_THROTTLE)
+            self._write_error(f'cannot flush {self.output}: {exc}')
 
     def _log_flushed(self) -> None:
         flushed = self._bag.flushed_counts
@@ -445,7 +449,14 @@ class BagRecorder(Node):
                     self.destroy_subscription(sub)
                 except Exception as exc:
                     self.get_logger().debug(f'destroying the {topic.name} subscription: {exc}')
-        self._bag.close()
+        try:
+            self._bag.set_custom_data(RECORDER_KEY, json.dumps(self._account(), sort_keys=True))
+        except Exception as exc:  # a full disk: the bag says nothing, the exit code does
+            self._write_error(f'cannot write the metadata of {self.output}: {exc}')
+        try:
+            self._bag.close()
+        except Exception as exc:
+            self._write_error(f'cannot close {self.output}: {exc}')
         stats = self.stats()
         lines = [f'recorded {stats.total} messages on {len(stats.written)} topics '
                  f'into {self.output}']
@@ -455,6 +466,23 @@ class BagRecorder(Node):
             self._stats_logger.warning(f'lost in DDS: {stats.lost}; write errors: '
                                        f'{stats.errors}')
         return stats
+
+    def _account(self) -> dict[str, Any]:
+        """What the recorder itself knows it lost (``tiltrov.recorder`` in the bag)."""
+        stats = self.stats()
+        return {'write_errors': stats.errors, 'first_error': self._first_error,
+                'lost_in_dds': stats.lost, 'bad_clock_samples': self._bad_clock}
+
+    @property
+    def first_error(self) -> str:
+        """The first write error, as logged ('' if none)."""
+        return self._first_error
+
+    @property
+    def lost_data(self) -> bool:
+        """True when a message could not be written or DDS reported samples lost."""
+        stats = self.stats()
+        return bool(stats.errors or stats.lost)
 
     def destroy_node(self) -> None:
         try:
@@ -467,7 +495,7 @@ class BagRecorder(Node):
 
 def recorder_command(output: str, *, run_info: Mapping[str, Any] | None = None,
                      params: Mapping[str, Any] | None = None,
-                     executable: str = NODE_NAME) -> list[str]:
+                     executable: str = RECORDER) -> list[str]:
     """argv that starts the recorder as a process (e.g. for the launcher).
 
     ``params`` values are passed as ``-p name:=value`` with YAML quoting, so
@@ -500,7 +528,8 @@ def main(args: list[str] | None = None) -> int:
     # ends cleanly) and chain to the previous handler: for SIGINT, Python's,
     # which would raise KeyboardInterrupt anywhere, even inside a bag write.
     signal.signal(signal.SIGINT, lambda signum, frame: None)
-    rclpy.init(args=args)
+    if not init(args, RECORDER):
+        return 1
     # Created now, while the context is valid: a signal may come during start-up.
     executor = SingleThreadedExecutor()
     node: BagRecorder | None = None
@@ -521,6 +550,12 @@ def main(args: list[str] | None = None) -> int:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+    if node is not None and node.lost_data:
+        stats = node.stats()
+        print(f'bag_recorder: data lost in {node.output}: {stats.errors} message(s) not '
+              f'written{f" ({node.first_error})" if stats.errors else ""}; DDS lost: '
+              f'{stats.lost or "none"}', file=sys.stderr, flush=True)
+        return 1
     return 0
 
 

@@ -15,16 +15,25 @@ Modes (parameter ``mode``):
   t_i, which it applies before stepping (zero-order hold until the next
   tick), exactly as :func:`tiltrov_ros.core.runner.run` does. Before the
   initial state it waits until ``startup_subscribers`` readers are matched on
-  ``odom`` and both command topics have a publisher, then ``startup_delay``
+  ``odom`` and a publisher on each command topic, then ``startup_delay``
   wall seconds more. If the commands of a tick
   have not come after ``stall_timeout`` wall seconds, the wait is reported on
   ``/diagnostics`` as a stall and the state at t_i (joint_states, odom, clock)
   is published again, so a lost message or a restarted controller resumes the
-  run; every node of the stack answers a repeated stamp idempotently.
+  run; every node of the stack answers a repeated stamp idempotently. The
+  initial state is published again only for a reader matched after it went
+  out (a late reader cannot have it): the first answer may be slow (a node
+  holds its outputs until the bag recorder reads them, up to
+  ``RECORDER_WAIT``), and a state published twice is recorded twice. Only a
+  start-up longer than ``RECORDER_WAIT`` + ``stall_timeout`` is a stall.
 * ``realtime``: a wall-clock timer steps the plant ``real_time_factor`` times
   faster than real time; the latest command (by stamp) is in force. Time
   starts once ``startup_subscribers`` readers are matched on ``odom`` (0: at
   once), so a controller started with the plant is there from t = 0.
+
+In both modes a command stamped more than one plant step after the plant's
+time is rejected (``future_stamp``): it answers no state yet published, and,
+latest by stamp, it would shut out the real answers until its time.
 
 With ``duration`` > 0 the plant stops at that sim time (after publishing the
 state at ``duration``) and :attr:`PlantSimulator.finished` completes; with
@@ -35,74 +44,58 @@ acknowledged the last messages (the launcher ends the run on it).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 import sys
 from typing import Any
 
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.duration import Duration
 from rclpy.parameter import Parameter
 from rclpy.task import Future
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 
-from tiltrov_ros.core.disturbances import Disturbances
-from tiltrov_ros.core.errors import ParameterError
-from tiltrov_ros.core.kinematics import quat_from_euler
-from tiltrov_ros.core.params import RobotParams
-from tiltrov_ros.core.plant import Plant
-from tiltrov_ros.core.scenarios import (
-    InitialState,
-    Scenario,
-    ThrusterFault,
-    failed_at,
-    load_scenario,
-)
-from tiltrov_ros.core.timebase import seconds, to_ns
-from tiltrov_ros.core.validation import InvalidInput, failed_thruster_indices
-from tiltrov_ros.core.validation import stamp_ns as checked_stamp_ns
-
-from .common import (
+from tiltrov_ros.core.names import (
     CLOCK,
     JOINT_STATES,
     LOCKSTEP,
-    MODES,
     ODOM,
-    OK,
-    PUBLISHER_QOS,
-    REALTIME,
-    RELIABLE_QOS,
-    THROTTLE,
+    PLANT,
     THRUST_CMD,
     THRUSTERS,
     TILT_CMD,
     TILTS,
-    WARN,
-    Overrides,
-    TiltrovNode,
-    declare_failed_thrusters,
-    declare_robot,
-    descriptor,
+)
+from tiltrov_ros.core.scenarios import failed_at
+from tiltrov_ros.core.timebase import format_ns, seconds, to_ns
+from tiltrov_ros.core.validation import (
+    InvalidInput,
+    check_answerable,
+    checked_stamp_ns,
+    failed_thruster_indices,
+)
+
+from .base import OK, RECORDER_WAIT, THROTTLE, WARN, TiltrovNode, guarded, input_callback
+from .conversions import (
     fill_joint_state,
     fill_odometry,
-    format_ns,
-    guarded,
-    input_callback,
     joint_state_values,
-    main_loop,
     new_joint_state,
     new_odometry,
     set_stamp,
 )
+from .executors import main_loop
+from .parameters import Overrides
+from .plant_config import declare_parameters
+from .qos import PUBLISHER_QOS, RELIABLE_QOS
 
-NODE_NAME = 'plant_simulator'
 #: joint_states value of a field a joint does not have (thruster position and
-#: velocity, servo effort): 0.0, since no topic carries NaN (README.md, "Reliability").
+#: velocity, servo effort): 0.0, since no topic carries NaN (docs/reliability.md).
 NO_VALUE = 0.0
 #: s (wall): how often the lockstep watchdog looks at the start-up and stall state.
 WATCHDOG_PERIOD = 0.05
-#: s (wall): re-publication period of the initial state until the first commands come.
+#: s (wall): how often the plant looks for readers matched after the initial state went
+#: out, until the first commands come (such a reader gets the initial state again).
 STARTUP_RETRY = 0.25
 #: Most plant steps one realtime timer callback catches up before it re-bases.
 MAX_CATCH_UP = 100
@@ -113,116 +106,10 @@ MAX_PENDING = 100
 _REJECTED: list[float] = []
 
 
-@dataclass(frozen=True)
-class PlantConfig:
-    """The plant node's parameters, validated."""
-
-    mode: str
-    real_time_factor: float
-    step_ns: int
-    control_period_ns: int
-    robot: RobotParams               # nominal robot, scenario overrides applied
-    disturbances: Disturbances
-    initial_state: InitialState
-    scenario: str                    # name, path or '' (none)
-    duration_ns: int                 # 0: no end
-    exit_at_end: bool
-    stall_timeout: float             # s, wall
-    startup_subscribers: int
-    startup_delay: float             # s, wall
-    command_timeout: float = 0.5     # s, sim time; 0: off
-    failed_thrusters: tuple[int, ...] = ()          # indices 0..3 (parameter)
-    faults: tuple[ThrusterFault, ...] = ()          # the scenario's
-
-    def build_plant(self) -> Plant:
-        """The plant at the initial state, as ``StackConfig.build_plant`` makes it."""
-        init = self.initial_state
-        return Plant(self.robot, self.disturbances, step_ns=self.step_ns,
-                     position=init.position, quaternion=quat_from_euler(*init.euler),
-                     nu=init.nu)
-
-
-def declare_parameters(node: TiltrovNode) -> PlantConfig:
-    """Declare the plant's parameters on ``node`` and return them validated."""
-    d = node.declare_parameter
-    mode = d('mode', REALTIME, descriptor(
-        'lockstep: as fast as possible, deterministic, waits at each control tick for '
-        'the thrust_cmd and tilt_cmd stamped with it; realtime: wall-clock stepping',
-        read_only=True, constraints='lockstep or realtime')).value
-    rtf = d('real_time_factor', 1.0, descriptor(
-        'realtime mode: sim seconds per wall second (1.0 = wall clock)',
-        floating=(0.001, 1000.0))).value
-    step_size = d('step_size', 0.01, descriptor(
-        'plant step h, s (RK4); the control period must be a multiple of it',
-        read_only=True, floating=(1e-5, 1.0))).value
-    scenario_name = d('scenario', '', descriptor(
-        'scenario name (config/scenarios/<name>.yaml) or path: initial state, '
-        'disturbances and robot overrides; empty: at rest at the origin, no disturbance',
-        read_only=True)).value
-    # Declared without a default: unset means "the scenario's value".
-    com_error = d('com_error', Parameter.Type.DOUBLE_ARRAY, descriptor(
-        "true center of gravity minus the nominal one, base_link_frd, m (the paper's "
-        'disturbance); overrides the scenario; unset: the scenario\'s (or zero)',
-        read_only=True, constraints='3 finite numbers')).value
-    current = d('current', Parameter.Type.DOUBLE_ARRAY, descriptor(
-        "mean ocean current in odom_ned, m/s; overrides the scenario's; unset: the "
-        "scenario's (or zero)", read_only=True, constraints='3 finite numbers')).value
-    duration = d('duration', 0.0, descriptor(
-        'sim time at which the run ends, s (a whole number of steps); 0: never',
-        read_only=True, floating=(0.0, 1e9))).value
-    exit_at_end = d('exit_at_end', False, descriptor(
-        'exit the process (code 0) when duration is reached', read_only=True)).value
-    stall_timeout = d('stall_timeout', 1.0, descriptor(
-        'lockstep: wall seconds without the commands of a tick before a stall is '
-        'reported and the tick\'s state published again', floating=(0.01, 3600.0))).value
-    startup_subscribers = d('startup_subscribers', 1, descriptor(
-        'odom readers to wait for before publishing the initial state (realtime: before '
-        'time starts); 0: start at once', read_only=True, integer=(0, 1000))).value
-    startup_delay = d('startup_delay', 0.0, descriptor(
-        'wall seconds to wait once the readers are there, so that every other '
-        'pair of endpoints (e.g. a bag recorder and the allocator) is matched too',
-        read_only=True, floating=(0.0, 60.0))).value
-    command_timeout = d('command_timeout', 0.5, descriptor(
-        'realtime: sim seconds without a thrust_cmd after which the thrusters are '
-        'commanded to zero (tilts held) until commands return; 0: off',
-        floating=(0.0, 3600.0))).value
-    failed = declare_failed_thrusters(node)
-    node.declare_stamp_bounds()
-    robot, period = declare_robot(node)
-    node.check_overrides()
-
-    if mode not in MODES:
-        raise ParameterError('mode', f'got {mode!r}; allowed: {", ".join(MODES)}')
-    scenario: Scenario | None = load_scenario(scenario_name) if scenario_name else None
-    disturbances = scenario.disturbances if scenario is not None else Disturbances()
-    if com_error is not None:
-        disturbances = replace(disturbances, com_error=tuple(com_error))
-    if current is not None:
-        disturbances = replace(disturbances, current=tuple(current))
-    step_ns = to_ns(step_size)
-    period_ns = to_ns(period)
-    if period_ns % step_ns:
-        raise ParameterError('control_period', f'got {period!r} s; allowed: a whole '
-                             f'multiple of step_size ({step_size!r} s)')
-    duration_ns = to_ns(duration)
-    if duration_ns % step_ns:
-        raise ParameterError('duration', f'got {duration!r} s; allowed: 0 or a whole '
-                             f'number of steps ({step_size!r} s)')
-    return PlantConfig(
-        mode=mode, real_time_factor=float(rtf), step_ns=step_ns, control_period_ns=period_ns,
-        robot=scenario.robot(robot) if scenario is not None else robot,
-        disturbances=disturbances,
-        initial_state=scenario.initial_state if scenario is not None else InitialState(),
-        scenario=scenario_name, duration_ns=duration_ns, exit_at_end=bool(exit_at_end),
-        stall_timeout=float(stall_timeout), startup_subscribers=int(startup_subscribers),
-        startup_delay=float(startup_delay), command_timeout=float(command_timeout),
-        failed_thrusters=failed, faults=scenario.faults if scenario is not None else ())
-
-
 class PlantSimulator(TiltrovNode):
     """The simulated robot (see the module docstring)."""
 
-    def __init__(self, *, node_name: str = NODE_NAME, namespace: str | None = None,
+    def __init__(self, *, node_name: str = PLANT, namespace: str | None = None,
                  context: Any = None, cli_args: Sequence[str] | None = None,
                  parameter_overrides: Overrides = None) -> None:
         super().__init__(node_name, namespace=namespace, context=context, cli_args=cli_args,
@@ -237,11 +124,17 @@ class PlantSimulator(TiltrovNode):
         self._odom_pub = self.create_safe_publisher(Odometry, ODOM, PUBLISHER_QOS)
         self._joint_pub = self.create_safe_publisher(JointState, JOINT_STATES, PUBLISHER_QOS)
         self._clock_pub = self.create_safe_publisher(ClockMsg, CLOCK, PUBLISHER_QOS)
+        self.expect_single_source(ODOM, JOINT_STATES, CLOCK)
         self._odom_msg = new_odometry()
         self._joint_msg = new_joint_state(TILTS + THRUSTERS)
         self._clock_msg = ClockMsg()
-        self.create_subscription(JointState, THRUST_CMD, self._on_thrust_cmd, RELIABLE_QOS)
-        self.create_subscription(JointState, TILT_CMD, self._on_tilt_cmd, RELIABLE_QOS)
+        self._command_subs = (
+            self.create_input_subscription(JointState, THRUST_CMD, self._on_thrust_cmd,
+                                           RELIABLE_QOS),
+            self.create_input_subscription(JointState, TILT_CMD, self._on_tilt_cmd,
+                                           RELIABLE_QOS))
+        #: readers matched on odom, joint_states, /clock when the initial state went out
+        self._initial_readers: tuple[int, ...] = ()
 
         # lockstep: tick ns -> [thrusts, tilts] (None: not yet; _REJECTED: bad message)
         self._pending: dict[int, list[list[float] | None]] = {}
@@ -300,7 +193,7 @@ class PlantSimulator(TiltrovNode):
         if not self.finished.done():
             self._waiting_since = None
             t = self.plant.time_ns
-            wall = (self.steady_ns() - self._started_at) / 1e9
+            wall = seconds(self.steady_ns() - self._started_at)
             self.get_logger().info(
                 f'reached the end of the run at {format_ns(t)}: {wall:.3f} s wall since '
                 f'the initial state, real-time factor {seconds(t) / max(wall, 1e-9):.2f}')
@@ -328,6 +221,7 @@ class PlantSimulator(TiltrovNode):
                               or self.finished.done()):
             return   # a re-published answer to a tick already passed
         ns = self.check_header(msg.header, None)
+        check_answerable(ns, self.plant.time_ns, self.config.step_ns)
         values = joint_state_values(msg, names, field)
         if not self.lockstep:
             if ns >= self._last_applied[kind]:
@@ -352,10 +246,17 @@ class PlantSimulator(TiltrovNode):
         self._advance()
 
     def on_rejected(self, topic: str, bad: InvalidInput, stamp: int | None) -> None:
-        """A rejected command leaves the previous one in force. In lockstep one with a
-        valid stamp still answers its tick (the run goes on); a bad stamp answers none."""
-        if self.lockstep and stamp is not None and not self.finished.done():
-            self._hold(stamp, 0 if topic == THRUST_CMD else 1, _REJECTED)
+        """A rejected command leaves the previous one in force. In lockstep one stamped
+        with the tick the plant waits at answers that tick, unless a valid one already
+        did (the run goes on); one stamped ahead answers nothing, so that it cannot
+        stand in for a valid command not yet arrived; a bad stamp answers none."""
+        if (not self.lockstep or stamp is None or self.finished.done()
+                or stamp != self.plant.time_ns):
+            return
+        kind = 0 if topic == THRUST_CMD else 1
+        entry = self._pending.get(stamp)
+        if entry is None or entry[kind] is None:
+            self._hold(stamp, kind, _REJECTED)
 
     def _command(self, kind: int, values: list[float]) -> None:
         if kind == 0:
@@ -432,7 +333,7 @@ class PlantSimulator(TiltrovNode):
             now = self.steady_ns()
             if self._peers_since is None:
                 self._peers_since = now
-            if (now - self._peers_since) / 1e9 < self.config.startup_delay:
+            if seconds(now - self._peers_since) < self.config.startup_delay:
                 return
             if not self.lockstep:
                 self.destroy_timer(self._watchdog_timer)
@@ -440,20 +341,27 @@ class PlantSimulator(TiltrovNode):
                 return
             self._started = True
             self._started_at = now
+            self._initial_readers = self._state_readers()
             self._publish_state()
             self._advance()
             return
         since = self._waiting_since
         if since is None or self.finished.done():
             return
-        waited = (self.steady_ns() - since) / 1e9
+        waited = seconds(self.steady_ns() - since)
         t = self.plant.time_ns
         if not self._commands_seen:
-            # Start-up: a reader matched late may have missed the initial state.
-            if waited >= STARTUP_RETRY:
+            # Start-up: only a reader matched after the initial state went out misses it.
+            # The others have it (reliable) and may answer late: a node holds its outputs
+            # until the recorder reads them (RECORDER_WAIT at most).
+            readers = self._state_readers()
+            if waited >= STARTUP_RETRY and any(
+                    n > n0 for n, n0 in zip(readers, self._initial_readers)):
                 self.startup_retries += 1
+                self._initial_readers = readers
                 self._republish()
-            return
+            if waited < RECORDER_WAIT + self.config.stall_timeout:
+                return
         if waited >= self.config.stall_timeout:
             self.stalls += 1
             self._stalled = True
@@ -471,11 +379,17 @@ class PlantSimulator(TiltrovNode):
         self._publish_state()
 
     def _peers_ready(self) -> bool:
-        """lockstep: the odom readers and both command publishers; realtime: the readers."""
+        """lockstep: the odom readers and both command publishers matched; realtime: the
+        readers."""
         if self._odom_pub.get_subscription_count() < self.config.startup_subscribers:
             return False
-        return not self.lockstep or (self.count_publishers(THRUST_CMD) > 0
-                                     and self.count_publishers(TILT_CMD) > 0)
+        return not self.lockstep or all(sub.get_publisher_count() > 0
+                                        for sub in self._command_subs)
+
+    def _state_readers(self) -> tuple[int, ...]:
+        """Readers matched on each writer of the state (odom, joint_states, /clock)."""
+        return tuple(pub.get_subscription_count()
+                     for pub in (self._odom_pub, self._joint_pub, self._clock_pub))
 
     # -- realtime --------------------------------------------------------------------
 
@@ -575,17 +489,6 @@ class PlantSimulator(TiltrovNode):
             'failed_thrusters': [i + 1 for i in plant.failed_thrusters],
         }
 
-    def wait_for_delivery(self, timeout: float = 0.5) -> bool:
-        """Wait (at most ``timeout`` s in all) until every reliable reader acknowledged
-        the last messages (end of run). Fast DDS acknowledges on its heartbeat period,
-        so this is a bounded courtesy: the samples are already on the wire."""
-        deadline = self.steady_ns() + int(timeout * 1e9)
-        acked = True
-        for pub in (self._joint_pub, self._odom_pub, self._clock_pub):
-            left = max(deadline - self.steady_ns(), 0)
-            acked = pub.wait_for_all_acked(Duration(nanoseconds=left)) and acked
-        return acked
-
 
 def main(args: list[str] | None = None) -> int:
     """``plant_simulator [--ros-args --params-file config/plant_simulator.yaml ...]``."""
@@ -593,11 +496,7 @@ def main(args: list[str] | None = None) -> int:
     def until(node: Any) -> Future | None:
         return node.finished if node.config.exit_at_end else None
 
-    def before_exit(node: Any) -> None:
-        node.publish_diagnostics()      # the final counts, for recorders and tiltrov soak
-        node.wait_for_delivery()
-
-    return main_loop(PlantSimulator, args, NODE_NAME, until=until, before_exit=before_exit)
+    return main_loop(PlantSimulator, args, PLANT, until=until)
 
 
 if __name__ == '__main__':

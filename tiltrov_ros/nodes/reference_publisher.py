@@ -29,35 +29,33 @@ from typing import Any
 from geometry_msgs.msg import PoseStamped, TwistStamped
 from rosgraph_msgs.msg import Clock as ClockMsg
 
-from tiltrov_ros.core.scenarios import ReferenceProfile, load_scenario
-from tiltrov_ros.core.timebase import seconds, to_ns
-from tiltrov_ros.core.validation import stamp_ns as checked_stamp_ns
-
-from .common import (
+from tiltrov_ros.core.names import (
     CLOCK,
-    CLOCK_READER_QOS,
     FRAME_EARTH,
-    OK,
-    PUBLISHER_QOS,
+    REFERENCE,
     SETPOINT,
     SETPOINT_VELOCITY,
-    THROTTLE,
-    WARN,
-    Overrides,
-    TiltrovNode,
-    declare_robot,
-    descriptor,
-    fill_pose,
-    fill_twist,
-    format_ns,
-    guarded,
-    input_callback,
-    main_loop,
-    stamp_ns,
 )
+from tiltrov_ros.core.paramtable import Param, ParamTable
+from tiltrov_ros.core.scenarios import ReferenceProfile, load_scenario
+from tiltrov_ros.core.timebase import format_ns, seconds, to_ns
+from tiltrov_ros.core.validation import checked_stamp_ns
 
-NODE_NAME = 'reference_publisher'
+from .base import OK, THROTTLE, WARN, TiltrovNode, guarded, input_callback
+from .conversions import fill_pose, fill_twist, stamp_ns
+from .executors import main_loop
+from .parameters import Overrides, check, declare, declare_robot
+from .qos import CLOCK_READER_QOS, PUBLISHER_QOS
 
+#: The reference publisher's own parameters (besides the robot and wait_for_recorder).
+REFERENCE_PARAMS = ParamTable('reference_publisher', [
+    Param('scenario', 'str', '', 'scenario name (config/scenarios/<name>.yaml) or path whose '
+          'reference is played; empty: hold the origin (eta_d = 0)', read_only=True),
+    Param('duration', 'float', 0.0, 'publish ticks before this sim time only; 0: no end', 's',
+          low=0.0, high=1e9, read_only=True),
+    Param('max_catch_up', 'int', 100, 'most ticks published for one /clock message (the '
+          'latest ones)', low=1, high=1_000_000),
+])
 #: eta_d = 0 for ever: the reference without a scenario.
 HOLD_ORIGIN = ReferenceProfile(((),) * 6)
 
@@ -65,25 +63,21 @@ HOLD_ORIGIN = ReferenceProfile(((),) * 6)
 class ReferencePublisher(TiltrovNode):
     """Publishes the reference at every control tick (see the module docstring)."""
 
-    def __init__(self, *, node_name: str = NODE_NAME, namespace: str | None = None,
+    reads_clock = True      # its own /clock reader rejects and counts bad samples
+
+    def __init__(self, *, node_name: str = REFERENCE, namespace: str | None = None,
                  context: Any = None, cli_args: Sequence[str] | None = None,
                  parameter_overrides: Overrides = None) -> None:
         super().__init__(node_name, namespace=namespace, context=context, cli_args=cli_args,
                          parameter_overrides=parameter_overrides)
-        d = self.declare_parameter
-        self.scenario = d('scenario', '', descriptor(
-            'scenario name (config/scenarios/<name>.yaml) or path whose reference is '
-            'played; empty: hold the origin (eta_d = 0)', read_only=True)).value
-        duration = d('duration', 0.0, descriptor(
-            'publish ticks before this sim time only, s; 0: no end', read_only=True,
-            floating=(0.0, 1e9))).value
-        self.max_catch_up = d('max_catch_up', 100, descriptor(
-            'most ticks published for one /clock message (the latest ones)',
-            integer=(1, 1_000_000))).value
+        own = declare(self, REFERENCE_PARAMS)
         _, period = declare_robot(self)
         self.check_overrides()
+        own = check(REFERENCE_PARAMS, own)
+        self.scenario = own['scenario']
+        self.max_catch_up = own['max_catch_up']
         self.period_ns = to_ns(period)
-        self.duration_ns = to_ns(duration)
+        self.duration_ns = to_ns(own['duration'])
         self.profile = (load_scenario(self.scenario).reference if self.scenario
                         else HOLD_ORIGIN)
         self.sim_time = bool(self.get_parameter('use_sim_time').value)
@@ -109,7 +103,7 @@ class ReferencePublisher(TiltrovNode):
         self.skipped = 0
         self.restarts = 0
         if self.sim_time:
-            self.create_subscription(ClockMsg, CLOCK, self._on_clock, CLOCK_READER_QOS)
+            self.create_input_subscription(ClockMsg, CLOCK, self._on_clock, CLOCK_READER_QOS)
         else:
             self._start_ns = self.get_clock().now().nanoseconds
             self.create_timer(seconds(self.period_ns), self._on_timer)
@@ -185,7 +179,7 @@ class ReferencePublisher(TiltrovNode):
 
 def main(args: list[str] | None = None) -> int:
     """``reference_publisher [--ros-args --params-file config/reference_publisher.yaml ...]``."""
-    return main_loop(ReferencePublisher, args, NODE_NAME)
+    return main_loop(ReferencePublisher, args, REFERENCE)
 
 
 if __name__ == '__main__':

@@ -11,10 +11,16 @@ solve for the thrusts (``allocate_fixed``). Parameter ``tilt_request``:
 
 * ``required``: every wrench waits for the tilt request with its stamp (they
   travel on two topics, so either may come first); after ``input_timeout``
-  wall seconds the latest request received is used (counted on /diagnostics);
+  wall seconds the latest request received is used (counted on /diagnostics).
+  The wait is measured from the oldest wrench not answered: a newer wrench
+  replaces the waiting one (realtime) but does not restart the wait;
 * ``ignored``: free allocation, the topic is not subscribed;
-* ``auto`` (default): ``required`` once a tilt request has been received or
-  a ``tilt_request`` publisher is in the graph, else free allocation.
+* ``auto`` (default): free allocation until a tilt request carries the stamp
+  of a wrench (the switching controller's do); from then on ``required``,
+  until a wrench waits ``input_timeout`` in vain, which returns to free
+  allocation. A request that matches no wrench (a stray publisher, another
+  run's replay) changes nothing; /diagnostics counts the requests received
+  and matched and names the topic's publishers.
 
 The launcher sets ``required`` for the switching controller and ``ignored``
 otherwise. A repeated wrench stamp re-publishes the cached answer without
@@ -27,7 +33,7 @@ from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 import math
 import sys
 from typing import Any
@@ -44,8 +50,22 @@ from tiltrov_ros.core.allocation import (
     load_allocator_config,
 )
 from tiltrov_ros.core.errors import ParameterError
+from tiltrov_ros.core.names import (
+    ALLOCATOR,
+    ALLOCATOR_MODES,
+    FRAME_BODY,
+    THRUST_CMD,
+    THRUSTERS,
+    TILT_CMD,
+    TILT_REQUEST,
+    TILTS,
+    WRENCH_ACHIEVED,
+    WRENCH_CMD,
+    WRENCH_DOFS,
+)
+from tiltrov_ros.core.paramtable import SHIPPED, Param, ParamTable
 from tiltrov_ros.core.scenarios import ThrusterFault, failed_at, load_scenario
-from tiltrov_ros.core.timebase import seconds, to_ns
+from tiltrov_ros.core.timebase import format_ns, seconds, to_ns
 from tiltrov_ros.core.validation import (
     MAX_WRENCH,
     InvalidInput,
@@ -55,48 +75,56 @@ from tiltrov_ros.core.validation import (
     limit_command,
 )
 
-from .common import (
-    FRAME_BODY,
-    OK,
-    PUBLISHER_QOS,
-    RELIABLE_QOS,
-    THROTTLE,
-    THRUST_CMD,
-    THRUSTERS,
-    TILT_CMD,
-    TILT_REQUEST,
-    TILTS,
-    WARN,
-    WRENCH_ACHIEVED,
-    WRENCH_CMD,
+from .base import OK, THROTTLE, WARN, TiltrovNode, guarded, input_callback
+from .conversions import (
     FloatArray,
-    InputWatchdog,
-    Overrides,
-    TiltrovNode,
-    declare_failed_thrusters,
-    declare_robot,
-    descriptor,
     fill_joint_state,
     fill_wrench,
-    format_ns,
-    guarded,
-    input_callback,
     joint_state_values,
-    main_loop,
     new_joint_state,
     new_wrench,
     stamp_ns,
     wrench_array,
 )
+from .executors import main_loop
+from .parameters import Overrides, check, declare, declare_failed_thrusters, declare_robot
+from .qos import PUBLISHER_QOS, RELIABLE_QOS
+from .watchdog import InputWatchdog
 
-NODE_NAME = 'thrust_allocator'
 TILT_REQUEST_MODES = ('auto', 'required', 'ignored')
 #: s (wall): how often a wrench waiting for its tilt request is looked at.
 WATCHDOG_PERIOD = 0.1
 BUFFER = 200
-ALLOCATOR_KEYS = ('mode', 'max_tilt_step', 'weights')
-#: Wrench components, in the order of wrench_cmd (force X Y Z, moment K M N).
-WRENCH_DOFS = ('X', 'Y', 'Z', 'K', 'M', 'N')
+
+#: The allocator's own configuration (the ``thrust_allocator`` section that ``tiltrov
+#: sim`` reads too; defaults: the shipped file's): declared and documented from here,
+#: validated by :meth:`~tiltrov_ros.core.allocation.AllocatorConfig.from_mapping`.
+ALLOCATION = ParamTable('allocation', [
+    Param('mode', 'str', SHIPPED, 'robust: exact when attainable, else least weighted wrench '
+          'error; paper: Section 3 of the paper', choices=ALLOCATOR_MODES),
+    Param('max_tilt_step', 'float', SHIPPED, 'how far each tilt may move per control period; '
+          '<= 0: the servo reach (tilt_rate_limit x control_period)', 'rad', low=-1e6,
+          high=1e6),
+    Param('weights', 'floats', SHIPPED, 'robust mode: weights of the wrench error', 'per '
+          'component X Y Z K M N', size=6, low=0.0, low_open=True),
+])
+#: The node's own parameters (besides the allocator's, failed_thrusters, the stamp
+#: bounds and the robot).
+ALLOCATOR_PARAMS = ParamTable('thrust_allocator', [
+    Param('tilt_request', 'str', 'auto', 'tilts fixed by the controller (switching baseline): '
+          'required, ignored, or auto (paired once a request carries a wrench_cmd stamp, free '
+          'again after a wrench waited input_timeout in vain)', choices=TILT_REQUEST_MODES,
+          read_only=True),
+    Param('input_timeout', 'float', 1.0, 'wall seconds a wrench waits for its tilt_request '
+          'before the latest one is used', 's', low=0.001, high=3600.0),
+    Param('wrench_timeout', 'float', 0.5, 'zero thrust (tilts held) is published every '
+          'control period while the newest valid wrench_cmd is older than this; on sim time '
+          'measured on /clock, else wall time since the message arrived; 0: off', 's',
+          low=0.0, high=3600.0),
+    Param('scenario', 'str', '', 'scenario name or path whose faults (thruster failures) the '
+          'allocator is told of at their time + detected_after, by the wrench stamps; empty: '
+          'none', read_only=True),
+])
 
 
 def thruster_names(indices: Sequence[int]) -> str:
@@ -113,7 +141,7 @@ class _Waiting:
 class ThrustAllocatorNode(TiltrovNode):
     """The thrust allocator (see the module docstring)."""
 
-    def __init__(self, *, node_name: str = NODE_NAME, namespace: str | None = None,
+    def __init__(self, *, node_name: str = ALLOCATOR, namespace: str | None = None,
                  context: Any = None, cli_args: Sequence[str] | None = None,
                  parameter_overrides: Overrides = None) -> None:
         super().__init__(node_name, namespace=namespace, context=context, cli_args=cli_args,
@@ -133,10 +161,10 @@ class ThrustAllocatorNode(TiltrovNode):
         self._thrust_pub = self.create_safe_publisher(
             JointState, THRUST_CMD, PUBLISHER_QOS,
             lambda msg: self._safe_msgs(stamp_ns(msg.header.stamp))[2])
-        self.create_subscription(WrenchStamped, WRENCH_CMD, self._on_wrench, RELIABLE_QOS)
+        self.create_input_subscription(WrenchStamped, WRENCH_CMD, self._on_wrench, RELIABLE_QOS)
         if self.tilt_request_mode != 'ignored':
-            self.create_subscription(JointState, TILT_REQUEST, self._on_tilt_request,
-                                     RELIABLE_QOS)
+            self.create_input_subscription(JointState, TILT_REQUEST, self._on_tilt_request,
+                                           RELIABLE_QOS)
             self.create_timer(WATCHDOG_PERIOD, self._watchdog, clock=self.steady)
 
         self.previous: AllocationResult | None = None
@@ -144,6 +172,10 @@ class ThrustAllocatorNode(TiltrovNode):
         self._last_msgs: tuple[WrenchStamped, JointState, JointState] | None = None
         self._requests: dict[int, tuple[float, float]] = {}
         self._latest_request: tuple[float, float] | None = None
+        #: auto mode: tilt requests have been carrying the wrenches' stamps.
+        self._paired = self.tilt_request_mode == 'required'
+        self.requests_received = 0
+        self.requests_matched = 0
         self._waiting: _Waiting | None = None
         self.ticks = 0
         self.feasible = 0
@@ -179,51 +211,32 @@ class ThrustAllocatorNode(TiltrovNode):
 
     def _declare_parameters(self) -> None:
         shipped = load_allocator_config()
-        d = self.declare_parameter
-        d('mode', shipped.mode, descriptor(
-            "robust: exact when attainable, else least weighted wrench error; paper: "
-            'Section 3 of the paper', constraints='robust or paper'))
-        d('max_tilt_step', shipped.max_tilt_step, descriptor(
-            'how far each tilt may move per control period, rad; <= 0: the servo reach '
-            '(tilt_rate_limit x control_period)', floating=(-1e6, 1e6)))
-        d('weights', [float(w) for w in shipped.weights], descriptor(
-            'robust mode: weights of the wrench error (X Y Z K M N)',
-            constraints='6 finite numbers > 0'))
-        self.tilt_request_mode = d('tilt_request', 'auto', descriptor(
-            'tilts fixed by the controller (switching baseline): required, ignored, or '
-            'auto (required once a tilt_request publisher or message is seen)',
-            read_only=True, constraints=' | '.join(TILT_REQUEST_MODES))).value
-        self.input_timeout = d('input_timeout', 1.0, descriptor(
-            'wall seconds a wrench waits for its tilt_request before the latest one is '
-            'used', floating=(0.001, 3600.0))).value
-        self.wrench_timeout = self.declare_timeout(
-            'wrench_timeout', 0.5, 'zero thrust (tilts held) is published every control '
-            'period while the newest valid wrench_cmd is older than this')
+        declare(self, ALLOCATION, defaults=asdict(shipped))
+        own = declare(self, ALLOCATOR_PARAMS, only=('tilt_request', 'input_timeout',
+                                                  'wrench_timeout'))
         self.failed_param = declare_failed_thrusters(self)
-        scenario = d('scenario', '', descriptor(
-            'scenario name or path whose faults (thruster failures) the allocator is told '
-            'of at their time + detected_after, by the wrench stamps; empty: none',
-            read_only=True)).value
+        own.update(declare(self, ALLOCATOR_PARAMS, only=('scenario',)))
         self.scenario_faults: tuple[ThrusterFault, ...] = (
-            load_scenario(scenario).faults if scenario else ())
+            load_scenario(own['scenario']).faults if own['scenario'] else ())
         self.declare_stamp_bounds()
         self.robot, self.control_period = declare_robot(self)
         self.check_overrides()
-        if self.tilt_request_mode not in TILT_REQUEST_MODES:
-            raise ParameterError('tilt_request', f'got {self.tilt_request_mode!r}; allowed: '
-                                 f'{", ".join(TILT_REQUEST_MODES)}')
+        own = check(ALLOCATOR_PARAMS, own)
+        self.tilt_request_mode = own['tilt_request']
+        self.input_timeout = own['input_timeout']
+        self.wrench_timeout = own['wrench_timeout']
         self.allocator_config = AllocatorConfig.from_mapping(
-            {key: self.get_parameter(key).value for key in ALLOCATOR_KEYS})
+            {key: self.get_parameter(key).value for key in ALLOCATION.names})
 
     def _validate_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
         verdict = self.check_failed_thrusters(parameters)
         if not verdict.successful:
             return verdict
-        changes = {p.name: p.value for p in parameters if p.name in ALLOCATOR_KEYS}
+        changes = {p.name: p.value for p in parameters if p.name in ALLOCATION.names}
         if not changes:
             return SetParametersResult(successful=True)
         values = {key: changes.get(key, self.get_parameter(key).value)
-                  for key in ALLOCATOR_KEYS}
+                  for key in ALLOCATION.names}
         try:
             AllocatorConfig.from_mapping(values)
         except ParameterError as exc:
@@ -234,14 +247,16 @@ class ThrustAllocatorNode(TiltrovNode):
         for p in parameters:
             if p.name == 'wrench_timeout':
                 self.wrench_timeout = float(p.value)
+            elif p.name == 'input_timeout':
+                self.input_timeout = float(p.value)
             elif p.name == 'failed_thrusters':
                 self.failed_param = failed_thruster_indices(p.value)
                 self._use_failed(self._wanted_failed(self._last_ns if self._last_ns >= 0
                                                      else None), 'failed_thrusters set')
-        if not any(p.name in ALLOCATOR_KEYS for p in parameters):
+        if not any(p.name in ALLOCATION.names for p in parameters):
             return
         self.allocator_config = AllocatorConfig.from_mapping(
-            {key: self.get_parameter(key).value for key in ALLOCATOR_KEYS})
+            {key: self.get_parameter(key).value for key in ALLOCATION.names})
         self.allocator = self.allocator_config.build(self.robot, self.control_period,
                                                      self.failed)
         self.get_logger().info(f'allocator changed: {self.allocator_config}')
@@ -270,14 +285,21 @@ class ThrustAllocatorNode(TiltrovNode):
     # -- inputs ----------------------------------------------------------------------
 
     def _needs_request(self) -> bool:
-        if self.tilt_request_mode == 'auto':
-            return (self._latest_request is not None
-                    or self.count_publishers(TILT_REQUEST) > 0)
-        return self.tilt_request_mode == 'required'
+        return self.tilt_request_mode != 'ignored' and self._paired
+
+    def _matched(self) -> None:
+        """A tilt request carried a wrench's stamp."""
+        self.requests_matched += 1
+        if not self._paired:
+            self._paired = True
+            self.get_logger().info('tilt_request carries the wrench_cmd stamps: tilts fixed '
+                                   'by the request from now on')
 
     @input_callback(WRENCH_CMD)
     def _on_wrench(self, msg: WrenchStamped) -> None:
         ns = self.check_header(msg.header, FRAME_BODY)
+        wrench = wrench_array(msg)
+        check_finite(wrench, 'wrench')      # before it may act: rejected changes nothing
         if ns == self._last_ns and self._last_msgs is not None:
             self.republished += 1
             self.wrench_watchdog.fresh(ns)
@@ -286,8 +308,6 @@ class ThrustAllocatorNode(TiltrovNode):
         if ns < self._last_ns:
             self._reset(f'wrench_cmd went back from {format_ns(self._last_ns)} to '
                         f'{format_ns(ns)}')
-        wrench = wrench_array(msg)
-        check_finite(wrench, 'wrench')
         self.wrench_watchdog.fresh(ns)
         self._handling = ns
         clipped, changed = clip_wrench(wrench)
@@ -297,14 +317,16 @@ class ThrustAllocatorNode(TiltrovNode):
                 f'wrench_cmd stamped {format_ns(ns)} has components beyond +-{MAX_WRENCH:g}: '
                 'clipped to it', throttle_duration_sec=THROTTLE)
             wrench = np.array(clipped)
-        if self._needs_request():
-            request = self._requests.get(ns)
-            if request is None:
-                if self._waiting is not None:
-                    self.dropped += 1     # a newer wrench came first (realtime)
-                self._waiting = _Waiting(ns, wrench, self.steady_ns())
-                return
+        request = self._requests.get(ns) if self.tilt_request_mode != 'ignored' else None
+        if request is not None:
+            self._matched()
             self._allocate(ns, wrench, request)
+        elif self._needs_request():
+            since = self.steady_ns()
+            if self._waiting is not None:
+                self.dropped += 1     # a newer wrench came first (realtime)
+                since = self._waiting.since     # the wait goes on: it does not restart
+            self._waiting = _Waiting(ns, wrench, since)
         else:
             self._allocate(ns, wrench, None)
 
@@ -313,13 +335,17 @@ class ThrustAllocatorNode(TiltrovNode):
         ns = self.check_header(msg.header, None)
         values = joint_state_values(msg, TILTS, 'position')
         request = (values[0], values[1])
+        self.requests_received += 1
         self._requests[ns] = request
         self._latest_request = request
+        if ns == self._last_ns:     # it came after its wrench was answered (free)
+            self._matched()
         if len(self._requests) > BUFFER:
             for stamp in sorted(self._requests)[:len(self._requests) - BUFFER]:
                 del self._requests[stamp]
         waiting = self._waiting
         if waiting is not None and waiting.ns == ns:
+            self._matched()
             self._allocate(ns, waiting.wrench, request)
 
     @guarded
@@ -327,10 +353,18 @@ class ThrustAllocatorNode(TiltrovNode):
         waiting = self._waiting
         if waiting is None:
             return
-        waited = (self.steady_ns() - waiting.since) / 1e9
+        waited = seconds(self.steady_ns() - waiting.since)
         if waited < self.input_timeout:
             return
         self.stale_requests += 1
+        if self.tilt_request_mode == 'auto':
+            self._paired = False
+            self.get_logger().warning(
+                f'no tilt_request stamped {format_ns(waiting.ns)} after {waited:.2f} s: '
+                'free allocation until a request carries a wrench stamp again',
+                throttle_duration_sec=THROTTLE)
+            self._allocate(waiting.ns, waiting.wrench, None)
+            return
         self.get_logger().warning(
             f'no tilt_request stamped {format_ns(waiting.ns)} after {waited:.2f} s: using '
             f'{"the latest" if self._latest_request else "none (free allocation)"}',
@@ -460,12 +494,43 @@ class ThrustAllocatorNode(TiltrovNode):
         self._publish(*self._safe_msgs(self.estimated_now_ns(*seen, to_ns(self.control_period))))
 
     def on_rejected(self, topic: str, bad: InvalidInput, stamp: int | None) -> None:
-        """A rejected wrench with a valid stamp gets the safe answer (the plant waits
-        for that stamp in lockstep); a bad stamp gets none."""
-        if topic == WRENCH_CMD and stamp is not None and stamp != self._last_ns:
-            self._answer_safe(stamp)
+        """A rejected wrench with a valid stamp, later than the last answered and not
+        waiting, gets the safe answer (the plant waits for that stamp in lockstep),
+        stamped no later than the node's clock (:meth:`safe_stamp`) and not kept as the
+        answer of that stamp; nothing else changes. A bad stamp gets none."""
+        waiting = self._waiting
+        if (topic != WRENCH_CMD or stamp is None or stamp <= self._last_ns
+                or (waiting is not None and waiting.ns == stamp)):
+            return
+        seen = self.wrench_watchdog.seen
+        self.safe_answers += 1
+        self._publish(*self._safe_msgs(self.safe_stamp(
+            stamp, seen[0] if seen else None, to_ns(self.control_period))))
 
     # -- diagnostics -----------------------------------------------------------------
+
+    def _tilt_request_status(self) -> tuple[int, str, dict[str, Any]]:
+        """What the tilt requests do: paired with the wrenches or not, who sends them,
+        wrenches that waited in vain or were replaced while waiting."""
+        if self.tilt_request_mode == 'ignored':
+            return OK, '', {}
+        infos = self.get_publishers_info_by_topic(self.resolve_topic_name(TILT_REQUEST))
+        senders = sorted({f'{i.node_namespace.rstrip("/")}/{i.node_name}' for i in infos})
+        level, text = OK, ''
+        unmatched = self.requests_received - self.requests_matched
+        if self.dropped or (self.stale_requests and self._paired):
+            level = WARN
+            text = (f'; wrenches waiting for tilt_request: {self.stale_requests} timed out, '
+                    f'{self.dropped} replaced by newer ones')
+        elif self.requests_received and not self._paired:
+            level = WARN
+            text = (f'; {unmatched} tilt_request(s) from {", ".join(senders) or "(gone)"} '
+                    'carry no wrench_cmd stamp: ignored (free allocation)')
+        return level, text, {
+            'tilt_request_pairing': 'paired' if self._paired else 'free',
+            'tilt_requests_received': self.requests_received,
+            'tilt_requests_matched': self.requests_matched,
+            'tilt_request_publishers': senders}
 
     def diagnostic_status(self) -> tuple[int, str, dict[str, Any]]:
         level = OK
@@ -483,8 +548,11 @@ class ThrustAllocatorNode(TiltrovNode):
             level = WARN
             message = (f'wrench_cmd stale (older than wrench_timeout '
                        f'{self.wrench_timeout:g} s): zero thrust; ' + message)
+        request_level, request_text, request_values = self._tilt_request_status()
+        level = max(level, request_level)
+        message += request_text
         last = self.previous
-        return level, message, {
+        return level, message, {**request_values,
             'mode': self.allocator_config.mode, 'ticks': self.ticks,
             'feasible': self.feasible, 'infeasible': self.infeasible,
             'saturated': self.saturated, 'max_weighted_error': self.max_error,
@@ -506,7 +574,7 @@ class ThrustAllocatorNode(TiltrovNode):
 
 def main(args: list[str] | None = None) -> int:
     """``thrust_allocator [--ros-args --params-file config/thrust_allocator.yaml ...]``."""
-    return main_loop(ThrustAllocatorNode, args, NODE_NAME)
+    return main_loop(ThrustAllocatorNode, args, ALLOCATOR)
 
 
 if __name__ == '__main__':

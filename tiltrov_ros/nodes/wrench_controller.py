@@ -26,7 +26,7 @@ controller.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 import sys
 from typing import Any
 
@@ -35,11 +35,12 @@ from nav_msgs.msg import Odometry
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.parameter import Parameter
-from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 
 from tiltrov_ros.core.controllers import (
-    CONTROLLER_KINDS,
+    CONTROL_LAW,
+    GAINS,
+    SWITCHING,
     ControllerConfig,
     ControlOutput,
     Reference,
@@ -48,7 +49,22 @@ from tiltrov_ros.core.controllers import (
     retune,
 )
 from tiltrov_ros.core.errors import ParameterError
-from tiltrov_ros.core.timebase import seconds, to_ns
+from tiltrov_ros.core.names import (
+    CONTROLLER,
+    FRAME_BODY,
+    FRAME_EARTH,
+    LOCKSTEP,
+    MODES,
+    ODOM,
+    REALTIME,
+    SETPOINT,
+    SETPOINT_VELOCITY,
+    TILT_REQUEST,
+    TILTS,
+    WRENCH_CMD,
+)
+from tiltrov_ros.core.paramtable import Param, ParamTable
+from tiltrov_ros.core.timebase import cdr_stamp_ns, format_ns, seconds, to_ns
 from tiltrov_ros.core.validation import (
     InvalidInput,
     check_finite,
@@ -56,68 +72,42 @@ from tiltrov_ros.core.validation import (
     check_quaternion,
 )
 
-from .common import (
-    FRAME_BODY,
-    FRAME_EARTH,
-    LOCKSTEP,
-    MODES,
-    ODOM,
-    OK,
-    PUBLISHER_QOS,
-    REALTIME,
-    RELIABLE_QOS,
-    SETPOINT,
-    SETPOINT_VELOCITY,
-    THROTTLE,
-    TILT_REQUEST,
-    TILTS,
-    WARN,
-    WRENCH_CMD,
+from .base import OK, THROTTLE, WARN, TiltrovNode, guarded, input_callback
+from .conversions import (
     FloatArray,
-    InputWatchdog,
-    Overrides,
-    TiltrovNode,
-    cdr_stamp_ns,
-    declare_robot,
-    descriptor,
     fill_joint_state,
     fill_wrench,
-    format_ns,
-    guarded,
-    input_callback,
-    main_loop,
     new_joint_state,
     new_wrench,
     odometry_arrays,
     pose_arrays,
-    reader_qos,
     stamp_ns,
     twist_array,
 )
+from .executors import main_loop
+from .parameters import Overrides, check, declare, declare_robot
+from .qos import PUBLISHER_QOS, RELIABLE_QOS, reader_qos
+from .watchdog import InputWatchdog
 
-NODE_NAME = 'wrench_controller'
 #: s (wall): how often the lockstep watchdog looks at a waiting tick.
 WATCHDOG_PERIOD = 0.1
 #: Buffered setpoints (by stamp); older ones are dropped.
 BUFFER = 200
-GAIN_KEYS = ('kp', 'kd', 'ki', 'integral_limit')
-SWITCHING_KEYS = ('hysteresis', 'dwell_time', 'position_scale', 'angle_scale', 'deadband',
-                  'settle_time')
-_GAIN_DOC = {
-    'kp': 'proportional gains (x y z roll pitch yaw), N/m and N m/rad',
-    'kd': 'derivative gains, N s/m and N m s/rad',
-    'ki': 'pid only: integral gains, N/(m s) and N m/(rad s)',
-    'integral_limit': 'pid only: bound on |ki * integral(e)| per DOF, N and N m (anti-windup)',
-}
-_SWITCHING_DOC = {
-    'hysteresis': "switch when the other group's error exceeds (1 + hysteresis) x the "
-                  "current group's (>= 0)",
-    'dwell_time': 'least time between two switches, s (>= 0)',
-    'position_scale': 'normalises position errors, m (> 0)',
-    'angle_scale': 'normalises angle errors, rad (> 0)',
-    'deadband': 'normalised error under which no switch happens (>= 0)',
-    'settle_time': 'added to the servo travel before thrust resumes, s (>= 0)',
-}
+#: The controller node's own parameters (besides the controller's: controller, gains.*,
+#: switching.*; and the stamp bounds and the robot).
+CONTROLLER_PARAMS = ParamTable('wrench_controller', [
+    Param('mode', 'str', REALTIME, 'lockstep: wait for the setpoint stamped with each tick '
+          '(deterministic); realtime: use the latest setpoint', choices=MODES, read_only=True),
+    Param('use_setpoint_velocity', 'bool', True, 'use setpoint_velocity as the feed-forward '
+          'd(eta_d)/dt (false: zero)', read_only=True),
+    Param('input_timeout', 'float', 1.0, 'lockstep: wall seconds to wait for the '
+          'setpoint_velocity of a tick before reading it as zero', 's', low=0.001,
+          high=3600.0),
+    Param('odom_timeout', 'float', 0.5, 'realtime: a zero wrench is published (every control '
+          'period) while the newest valid odom is older than this; on sim time measured on '
+          '/clock, else wall time since the message arrived; 0: off', 's', low=0.0,
+          high=3600.0),
+])
 
 
 @dataclass
@@ -135,15 +125,15 @@ def _config_mapping(get: Any) -> dict[str, Any]:
     """The ``wrench_controller`` parameters as ControllerConfig.from_mapping wants them."""
     return {
         'controller': get('controller'),
-        'gains': {key: list(get(f'gains.{key}')) for key in GAIN_KEYS},
-        'switching': {key: get(f'switching.{key}') for key in SWITCHING_KEYS},
+        'gains': {key: list(get(GAINS.full_name(key))) for key in GAINS.names},
+        'switching': {key: get(SWITCHING.full_name(key)) for key in SWITCHING.names},
     }
 
 
 class WrenchController(TiltrovNode):
     """The wrench controller (see the module docstring)."""
 
-    def __init__(self, *, node_name: str = NODE_NAME, namespace: str | None = None,
+    def __init__(self, *, node_name: str = CONTROLLER, namespace: str | None = None,
                  context: Any = None, cli_args: Sequence[str] | None = None,
                  parameter_overrides: Overrides = None) -> None:
         super().__init__(node_name, namespace=namespace, context=context, cli_args=cli_args,
@@ -165,13 +155,15 @@ class WrenchController(TiltrovNode):
                                          position=self._safe_tilts))
             if self.kind == 'switching' else None)
         # Raw: only the odometry at control ticks (1 in control_period / step_size) is
-        # deserialized; the stamp of the others is read from the CDR header.
+        # deserialized (bytes that do not decode are rejected: malformed); the stamp of
+        # the others is read from the CDR header.
         self.create_subscription(Odometry, ODOM, self._on_odom_raw, reader_qos(self.mode),
                                  raw=True)
-        self.create_subscription(PoseStamped, SETPOINT, self._on_setpoint, RELIABLE_QOS)
+        self.expect_single_source(ODOM)
+        self.create_input_subscription(PoseStamped, SETPOINT, self._on_setpoint, RELIABLE_QOS)
         if self.use_velocity:
-            self.create_subscription(TwistStamped, SETPOINT_VELOCITY, self._on_velocity,
-                                     RELIABLE_QOS)
+            self.create_input_subscription(TwistStamped, SETPOINT_VELOCITY, self._on_velocity,
+                                           RELIABLE_QOS)
 
         self._setpoints: dict[int, tuple[FloatArray, FloatArray]] = {}
         self._velocities: dict[int, FloatArray] = {}
@@ -213,35 +205,18 @@ class WrenchController(TiltrovNode):
 
     def _declare_parameters(self) -> None:
         shipped = load_controller_config()
-        d = self.declare_parameter
-        d('controller', shipped.kind, descriptor(
-            'control law: pd (eq. 16), switching (baseline: tilts 0 or 90 deg, with '
-            'tilt_request), pid (pd + g(eta) + clamped integral)', read_only=True,
-            constraints=' | '.join(CONTROLLER_KINDS)))
-        self.mode = d('mode', REALTIME, descriptor(
-            'lockstep: wait for the setpoint stamped with each tick (deterministic); '
-            'realtime: use the latest setpoint', read_only=True,
-            constraints='lockstep or realtime')).value
-        self.use_velocity = bool(d('use_setpoint_velocity', True, descriptor(
-            'use setpoint_velocity as the feed-forward d(eta_d)/dt (false: zero)',
-            read_only=True)).value)
-        self.input_timeout = d('input_timeout', 1.0, descriptor(
-            'lockstep: wall seconds to wait for the setpoint_velocity of a tick before '
-            'reading it as zero', floating=(0.001, 3600.0))).value
-        self.odom_timeout = self.declare_timeout(
-            'odom_timeout', 0.5, 'realtime: a zero wrench is published (every control '
-            'period) while the newest valid odom is older than this')
+        declare(self, CONTROL_LAW, defaults={'controller': shipped.kind})
+        own = declare(self, CONTROLLER_PARAMS)
         self.declare_stamp_bounds()
-        for key in GAIN_KEYS:
-            d(f'gains.{key}', [float(v) for v in getattr(shipped.gains, key)], descriptor(
-                _GAIN_DOC[key], constraints='6 finite numbers >= 0 (x y z roll pitch yaw)'))
-        for key in SWITCHING_KEYS:
-            d(f'switching.{key}', float(getattr(shipped.switching, key)), descriptor(
-                'switching only: ' + _SWITCHING_DOC[key], floating=(0.0, 1e6)))
+        declare(self, GAINS, defaults=asdict(shipped.gains))
+        declare(self, SWITCHING, defaults=asdict(shipped.switching))
         self.robot, self.control_period = declare_robot(self)
         self.check_overrides()
-        if self.mode not in MODES:
-            raise ParameterError('mode', f'got {self.mode!r}; allowed: {", ".join(MODES)}')
+        own = check(CONTROLLER_PARAMS, own)
+        self.mode = own['mode']
+        self.use_velocity = own['use_setpoint_velocity']
+        self.input_timeout = own['input_timeout']
+        self.odom_timeout = own['odom_timeout']
         self.controller_config = ControllerConfig.from_mapping(
             _config_mapping(lambda name: self.get_parameter(name).value))
 
@@ -265,6 +240,8 @@ class WrenchController(TiltrovNode):
         for p in parameters:
             if p.name == 'odom_timeout':
                 self.odom_timeout = float(p.value)
+            elif p.name == 'input_timeout':
+                self.input_timeout = float(p.value)
         if not any(p.name.startswith(('gains.', 'switching.')) for p in parameters):
             return
         self.controller_config = ControllerConfig.from_mapping(
@@ -277,8 +254,15 @@ class WrenchController(TiltrovNode):
 
     @guarded
     def _on_odom_raw(self, data: bytes) -> None:
-        if cdr_stamp_ns(data) % self.period_ns == 0:
-            self.on_odom(deserialize_message(data, Odometry))
+        try:
+            stamp = cdr_stamp_ns(data)
+        except ValueError:        # too short to hold a stamp
+            self.reject_malformed(ODOM, Odometry, data)
+            return
+        if stamp % self.period_ns == 0:
+            msg = self.decode(Odometry, ODOM, data)
+            if msg is not None:
+                self.on_odom(msg)
 
     @input_callback(ODOM)
     def on_odom(self, msg: Odometry) -> None:
@@ -286,6 +270,12 @@ class WrenchController(TiltrovNode):
         ns = self.check_header(msg.header, FRAME_EARTH)
         if ns % self.period_ns:
             return
+        # Validated whole before it may act: a rejected message changes nothing.
+        check_frame(msg.child_frame_id, FRAME_BODY, 'child_frame_id')
+        position, quaternion, nu = odometry_arrays(msg)
+        check_finite(position, 'position')
+        check_quaternion(quaternion)
+        check_finite(nu, 'twist')
         if ns == self._last_ns and self._last_msgs is not None:
             self.republished += 1
             self._publish(*self._last_msgs)
@@ -293,11 +283,6 @@ class WrenchController(TiltrovNode):
         if ns < self._last_ns:
             self._reset(f'odometry went back from {format_ns(self._last_ns)} to '
                         f'{format_ns(ns)}')
-        check_frame(msg.child_frame_id, FRAME_BODY, 'child_frame_id')
-        position, quaternion, nu = odometry_arrays(msg)
-        check_finite(position, 'position')
-        check_quaternion(quaternion)
-        check_finite(nu, 'twist')
         now = self.steady_ns()
         self.odom_watchdog.fresh(ns, now)
         self._tick = _Tick(ns, position, quaternion, nu, now)
@@ -389,12 +374,24 @@ class WrenchController(TiltrovNode):
         self._answer(ns, ControlOutput(np.zeros(6), self._safe_tilts, 'safe'))
 
     def on_rejected(self, topic: str, bad: InvalidInput, stamp: int | None) -> None:
-        """A rejected odometry tick with a valid stamp is answered with a zero wrench
-        (the state is unknown; the plant waits for that stamp in lockstep)."""
-        if (topic == ODOM and stamp is not None and stamp % self.period_ns == 0
-                and stamp != self._last_ns):
-            self._tick = None
-            self._publish_safe(stamp)
+        """A rejected odometry tick with a valid stamp, later than the last answered and
+        not waiting, is answered with a zero wrench (the state is unknown; the plant waits for that
+        stamp in lockstep), stamped no later than the node's clock (:meth:`safe_stamp`)
+        and not kept as the tick's answer: a valid odometry of the tick afterwards is
+        answered as usual, and nothing else changes."""
+        if (topic != ODOM or stamp is None or stamp % self.period_ns
+                or stamp <= self._last_ns or (self._tick is not None and self._tick.ns == stamp)):
+            return
+        seen = self.odom_watchdog.seen
+        self.safe_answers += 1
+        self._publish_zero(self.safe_stamp(stamp, seen[0] if seen else None, self.period_ns))
+
+    def _publish_zero(self, ns: int) -> None:
+        """A zero wrench (and the last finite tilt request) stamped ``ns``, not kept as
+        the answer of a tick."""
+        self._publish(fill_wrench(new_wrench(), ns, np.zeros(6)),
+                      None if self._tilt_pub is None else fill_joint_state(
+                          new_joint_state(TILTS), ns, position=self._safe_tilts))
 
     @guarded
     def _odom_watchdog(self) -> None:
@@ -404,10 +401,7 @@ class WrenchController(TiltrovNode):
         if seen is None:
             return
         self.watchdog_outputs += 1
-        ns = self.estimated_now_ns(*seen, self.period_ns)
-        self._publish(fill_wrench(new_wrench(), ns, np.zeros(6)),
-                      None if self._tilt_pub is None else fill_joint_state(
-                          new_joint_state(TILTS), ns, position=self._safe_tilts))
+        self._publish_zero(self.estimated_now_ns(*seen, self.period_ns))
 
     def _reset(self, why: str) -> None:
         self.resets += 1
@@ -423,7 +417,7 @@ class WrenchController(TiltrovNode):
         tick = self._tick
         if tick is None:
             return
-        waited = (self.steady_ns() - tick.since) / 1e9
+        waited = seconds(self.steady_ns() - tick.since)
         if waited < self.input_timeout:
             return
         if tick.ns in self._setpoints:
@@ -454,7 +448,7 @@ class WrenchController(TiltrovNode):
             message = (f'odom stale (older than odom_timeout {self.odom_timeout:g} s): '
                        'publishing a zero wrench')
         elif (tick is not None and self.lockstep
-                and (self.steady_ns() - tick.since) / 1e9 >= self.input_timeout):
+                and seconds(self.steady_ns() - tick.since) >= self.input_timeout):
             level = WARN
             message = f'waiting for the setpoint stamped {format_ns(tick.ns)}'
         elif self.velocity_timeouts or self.no_setpoint:
@@ -481,7 +475,7 @@ def _trim(buffer: dict[int, Any]) -> None:
 
 def main(args: list[str] | None = None) -> int:
     """``wrench_controller [--ros-args --params-file config/wrench_controller.yaml ...]``."""
-    return main_loop(WrenchController, args, NODE_NAME)
+    return main_loop(WrenchController, args, CONTROLLER)
 
 
 if __name__ == '__main__':

@@ -2,17 +2,16 @@
 
 from __future__ import annotations
 
-from collections.abc import Collection, Mapping
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 import math
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from tiltrov_ros.core.allocation.allocator import DEFAULT_WEIGHTS, Mode, ThrustAllocator
 from tiltrov_ros.core.errors import ParameterError
 from tiltrov_ros.core.params import RobotParams
+from tiltrov_ros.core.yamlfile import read_yaml
 from tiltrov_ros.paths import config_file
 
 ALLOCATOR_YAML = 'thrust_allocator.yaml'
@@ -45,10 +44,13 @@ class AllocatorConfig:
             raise ParameterError('max_tilt_step', f'got {step!r}; allowed: a number of rad '
                                  '(<= 0: the servo reach per control period)', source=source)
         weights = values.get('weights', DEFAULT_WEIGHTS)
-        if (not isinstance(weights, (list, tuple)) or len(weights) != 6
+        # Any sequence: a list from YAML, array('d') from the ROS parameter service.
+        if (isinstance(weights, (str, bytes)) or not isinstance(weights, Sequence)
+                or len(weights) != 6
                 or not all(isinstance(w, (int, float)) and not isinstance(w, bool)
                            and math.isfinite(w) and w > 0 for w in weights)):
-            raise ParameterError('weights', f'got {weights!r}; allowed: 6 finite numbers > 0',
+            shown = list(weights) if isinstance(weights, Sequence) else weights
+            raise ParameterError('weights', f'got {shown!r}; allowed: 6 finite numbers > 0',
                                  source=source)
         return cls(mode, float(step), tuple(float(w) for w in weights))
 
@@ -72,8 +74,7 @@ def load_allocator_config(path: str | Path | None = None) -> AllocatorConfig:
     if path is None:
         path = config_file(ALLOCATOR_YAML)
     source = str(path)
-    with Path(path).open(encoding='utf-8') as stream:
-        document = yaml.safe_load(stream)
+    document = read_yaml(path)
     section = document.get('thrust_allocator') if isinstance(document, Mapping) else None
     params = section.get('ros__parameters') if isinstance(section, Mapping) else None
     if not isinstance(params, Mapping):

@@ -1,0 +1,91 @@
+"""The nodes ``tiltrov launch`` starts and their parameters (no process started)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import yaml
+
+from tiltrov_ros.stack.specs import LaunchError, LaunchOptions, namespaced_config, stack_specs
+
+NODES = ('thrust_allocator', 'wrench_controller', 'reference_publisher', 'plant_simulator')
+
+
+def _spec(specs, name):
+    return next(s for s in specs if s.name == name)
+
+
+def test_specs_carry_mode_scenario_duration_and_robot_overrides() -> None:
+    specs, config, duration = stack_specs(LaunchOptions(scenario='pitch_hold_slow_servo',
+                                                        controller='switching'))
+    assert [s.name for s in specs] == list(NODES)
+    assert duration == 60.0 and config.controller.kind == 'switching'
+    plant = _spec(specs, 'plant_simulator').overrides
+    assert (plant['mode'], plant['scenario'], plant['duration'], plant['exit_at_end']) == (
+        'lockstep', 'pitch_hold_slow_servo', 60.0, True)
+    assert _spec(specs, 'thrust_allocator').overrides['tilt_request'] == 'required'
+    assert _spec(specs, 'wrench_controller').overrides['controller'] == 'switching'
+    for spec in specs:   # the scenario's robot override reaches every node
+        assert spec.overrides['robot.tilt_rate_limit'] == config.robot.tilt_rate_limit
+        assert [p.name for p in spec.params_files] == ['robot.yaml', f'{spec.name}.yaml']
+        if spec.name != 'plant_simulator':
+            assert spec.overrides['use_sim_time'] is True
+
+    specs, _, _ = stack_specs(LaunchOptions(controller='pd', allocator='paper', duration=2.0,
+                                            lockstep=False, real_time_factor=5.0))
+    assert _spec(specs, 'thrust_allocator').overrides['tilt_request'] == 'ignored'
+    assert _spec(specs, 'thrust_allocator').overrides['mode'] == 'paper'
+    assert _spec(specs, 'plant_simulator').overrides['real_time_factor'] == 5.0
+    assert _spec(specs, 'wrench_controller').overrides['mode'] == 'realtime'
+
+
+def test_scenario_file_paths_are_resolved(tmp_path: Path, repo_root: Path) -> None:
+    scenario = tmp_path / 'mine.yaml'
+    scenario.write_text((repo_root / 'config/scenarios/pitch_hold.yaml').read_text())
+    specs, _config, _ = stack_specs(LaunchOptions(scenario=str(scenario)))
+    assert _spec(specs, 'plant_simulator').overrides['scenario'] == str(scenario)
+    assert _spec(specs, 'reference_publisher').overrides['scenario'] == str(scenario)
+
+
+@pytest.mark.parametrize(('options', 'message'), [
+    (LaunchOptions(duration=0.015), 'whole number'),
+    (LaunchOptions(params=('wrench_controller:gains.kp',)), 'NODE:NAME:=VALUE'),
+    (LaunchOptions(params=('nobody:x:=1',)), 'unknown node'),
+])
+def test_bad_options_are_refused_before_anything_starts(options, message) -> None:
+    with pytest.raises(LaunchError, match=message):
+        stack_specs(options)
+
+
+def test_overrides_file_is_keyed_by_the_full_node_name(tmp_path: Path) -> None:
+    specs, _, _ = stack_specs(LaunchOptions(
+        duration=1.0, params=('wrench_controller:gains.kp:=[1.0, 2.0, 3.0, 4.0, 5.0, 6.0]',
+                              "wrench_controller:input_timeout:=2.5")))
+    spec = _spec(specs, 'wrench_controller')
+    document = yaml.safe_load(spec.write_overrides(tmp_path, '/robot1').read_text())
+    values = document['/robot1/wrench_controller']['ros__parameters']
+    assert values['gains.kp'] == [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]
+    assert values['input_timeout'] == 2.5 and values['mode'] == 'lockstep'
+    args = spec.ros_args(tmp_path / 'x.yaml', '/robot1')
+    assert args[:3] == ['--ros-args', '-r', '__ns:=/robot1']
+    assert args[-2:] == ['--params-file', str(tmp_path / 'x.yaml')]
+
+
+def test_namespaced_config_renames_node_sections(tmp_path: Path) -> None:
+    specs, _, _ = stack_specs(LaunchOptions(duration=1.0))
+    namespaced_config(specs, '/robot1', tmp_path)
+    controller = yaml.safe_load((tmp_path / 'wrench_controller.yaml').read_text())
+    assert list(controller) == ['/robot1/wrench_controller']
+    robot = yaml.safe_load((tmp_path / 'robot.yaml').read_text())
+    assert list(robot) == ['/**']
+
+
+def test_record_starts_the_recorder_first(tmp_path: Path) -> None:
+    options = LaunchOptions(duration=1.0, record=tmp_path / 'bag')
+    specs, _, _ = stack_specs(options)
+    recorder = specs[0]
+    assert recorder.name == 'bag_recorder'
+    assert recorder.overrides['use_sim_time'] is True
+    # The plant waits for the recorder too before it starts the run.
+    assert _spec(specs, 'plant_simulator').overrides['startup_subscribers'] == 2

@@ -1,0 +1,93 @@
+"""Figures of a campaign table (matplotlib Figure objects, rendered by Agg).
+
+* ``cdf_final_position.png``: the distribution (empirical CDF) of the final
+  position error per configuration, log scale; failed runs count as beyond
+  the axis, so a curve that ends below 1 shows them;
+* ``error_vs_current.png``: the final position error of every run against the
+  mean current's speed and its direction (deg from north towards east), one
+  marker per configuration, hollow for the runs that do not hold.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+from matplotlib.figure import Figure
+import numpy as np
+
+from tiltrov_ros.campaign.summary import final_position_error
+from tiltrov_ros.campaign.table import PARAM, number
+
+_MARKERS = 'os^vD<>p'
+_FLOOR_MM = 1e-3        # errors below are drawn here (log axes)
+_PNG_METADATA = {'Software': None}
+
+
+def _by_configuration(rows: Sequence[Mapping[str, str]], names: Sequence[str]
+                      ) -> dict[str, list[Mapping[str, str]]]:
+    return {name: [r for r in rows if r['configuration'] == name] for name in names}
+
+
+def cdf_figure(rows: Sequence[Mapping[str, str]], names: Sequence[str]) -> Figure:
+    fig = Figure(figsize=(7.0, 4.5))
+    ax = fig.add_subplot()
+    for name, mine in _by_configuration(rows, names).items():
+        errors = np.sort([1e3 * e for e in map(final_position_error, mine) if e is not None])
+        if not len(mine) or not len(errors):
+            continue
+        fraction = np.arange(1, len(errors) + 1) / len(mine)
+        ax.step(np.maximum(errors, _FLOOR_MM), fraction, where='post',
+                label=f'{name} ({len(mine)} runs)')
+    ax.set_xscale('log')
+    ax.set_ylim(0.0, 1.02)
+    ax.set_xlabel('final position error [mm] (mean |e| over the last 10 s, norm of x y z; '
+                  f'floor {_FLOOR_MM:g})')
+    ax.set_ylabel('fraction of runs')
+    ax.grid(True, which='both', alpha=0.3)
+    ax.legend(loc='lower right')
+    fig.tight_layout()
+    return fig
+
+
+def current_figure(rows: Sequence[Mapping[str, str]], names: Sequence[str]) -> Figure:
+    fig = Figure(figsize=(10.0, 4.2))
+    speed_ax, direction_ax = fig.subplots(1, 2, sharey=True)
+    for k, (name, mine) in enumerate(_by_configuration(rows, names).items()):
+        for holds in (True, False):
+            points = np.array([(number(r[PARAM + 'current_speed']),
+                                number(r[PARAM + 'current_direction']), final_position_error(r))
+                               for r in mine if (r['holds'] == '1') == holds
+                               and final_position_error(r) is not None],
+                              dtype=float).reshape(-1, 3)
+            color = f'C{k}'
+            style = {'marker': _MARKERS[k % len(_MARKERS)], 'linestyle': 'none', 'alpha': 0.7,
+                     'color': color, 'markerfacecolor': color if holds else 'none',
+                     'label': f'{name}, {"holds" if holds else "does not hold"}'}
+            error = np.maximum(1e3 * points[:, 2], _FLOOR_MM)
+            speed_ax.plot(points[:, 0], error, **style)
+            direction_ax.plot(points[:, 1], error, **style)
+    speed_ax.set_yscale('log')
+    speed_ax.set_xlabel('current speed [m/s]')
+    speed_ax.set_ylabel(f'final position error [mm] (floor {_FLOOR_MM:g})')
+    direction_ax.set_xlabel('current direction [deg from north, towards east]')
+    direction_ax.set_xticks(range(0, 361, 90))
+    for ax in (speed_ax, direction_ax):
+        ax.grid(True, which='both', alpha=0.3)
+    handles, labels = speed_ax.get_legend_handles_labels()
+    fig.legend(handles, labels, loc='upper center', ncol=min(4, len(labels)), frameon=False)
+    fig.tight_layout(rect=(0.0, 0.0, 1.0, 0.9))
+    return fig
+
+
+def write_figures(rows: Sequence[Mapping[str, str]], names: Sequence[str], out: Path, *,
+                  dpi: int = 100) -> list[Path]:
+    """Both figures into ``out``; their paths."""
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    for stem, fig in (('cdf_final_position', cdf_figure(rows, names)),
+                      ('error_vs_current', current_figure(rows, names))):
+        path = out / f'{stem}.png'
+        fig.savefig(path, dpi=dpi, metadata=_PNG_METADATA)
+        written.append(path)
+    return written

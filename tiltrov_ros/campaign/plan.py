@@ -1,0 +1,129 @@
+"""The runs of a campaign (sample x configuration) and the files that reproduce one.
+
+Everything a run needs is resolved here, on the machine that starts the
+campaign: the samples' scenarios, the shipped robot, controller and allocator
+files, the gain sets; a task carries a whole
+:class:`~tiltrov_ros.core.runner.StackConfig`, so a worker needs the package
+but none of the files. No Dask here.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import asdict
+from pathlib import Path
+import shlex
+from typing import Any, NamedTuple
+
+import yaml
+
+from tiltrov_ros.core.allocation import AllocatorConfig, load_allocator_config
+from tiltrov_ros.core.campaign import CampaignSpec, Configuration, Sample, draw_sample
+from tiltrov_ros.core.controllers import ControllerConfig, Gains, load_controller_config
+from tiltrov_ros.core.errors import CampaignError, TiltrovError
+from tiltrov_ros.core.params import load_control_period, load_robot_params
+from tiltrov_ros.core.runner import StackConfig
+
+
+class RunTask(NamedTuple):
+    """One run: its id (``s00042-pid-robust``), sample index, configuration name and
+    the resolved stack it runs."""
+
+    run_id: str
+    sample: int
+    configuration: str
+    config: StackConfig
+
+
+def run_id(sample: int, configuration: str) -> str:
+    return f's{sample:05d}-{configuration}'
+
+
+class Plan:
+    """The campaign's configurations resolved against the shipped files."""
+
+    def __init__(self, spec: CampaignSpec) -> None:
+        self.spec = spec
+        where = spec.source or 'campaign'
+        try:
+            self.robot = load_robot_params()
+            self.control_period = load_control_period()
+            shipped_controller = load_controller_config()
+            shipped_allocator = load_allocator_config()
+        except (TiltrovError, OSError) as exc:
+            raise CampaignError(f'{where}: the shipped parameter files: '
+                                f'{" ".join(str(exc).split())}') from exc
+        gain_sets = dict(spec.gain_sets)
+        self.controllers: dict[str, ControllerConfig] = {}
+        self.allocators: dict[str, AllocatorConfig] = {}
+        for config in spec.configurations:
+            gains = {**_plain(asdict(shipped_controller.gains)), **gain_sets[config.gains]}
+            self.controllers[config.name] = ControllerConfig(
+                config.controller, Gains.from_mapping(gains, source=where),  # type: ignore[arg-type]
+                shipped_controller.switching, where)
+            try:
+                self.allocators[config.name] = AllocatorConfig.from_mapping(
+                    {**_plain(asdict(shipped_allocator)), 'mode': config.allocator},
+                    source=where)
+            except TiltrovError as exc:
+                raise CampaignError(f'{where}: compare.allocators: '
+                                    f'{" ".join(str(exc).split())}') from exc
+
+    def stack(self, sample: Sample, configuration: Configuration) -> StackConfig:
+        """The stack of one run (:class:`CampaignError` naming the sample if invalid)."""
+        where = f'{self.spec.source or "campaign"} (sample {sample.index})'
+        scenario = sample.scenario(where)
+        try:
+            robot = scenario.robot(self.robot)
+        except TiltrovError as exc:
+            raise CampaignError(' '.join(str(exc).split())) from exc
+        return StackConfig(scenario, robot, self.controllers[configuration.name],
+                           self.allocators[configuration.name], self.control_period)
+
+    def tasks(self, samples: Sequence[Sample]) -> list[RunTask]:
+        """Every run of ``samples``: sample-major, configurations in the file's order."""
+        return [RunTask(run_id(s.index, c.name), s.index, c.name, self.stack(s, c))
+                for s in samples for c in self.spec.configurations]
+
+    def export(self, sample: int, configuration: str, folder: Path) -> list[Path]:
+        """The files that run ``(sample, configuration)`` again with ``tiltrov sim``:
+        scenario.yaml, wrench_controller.yaml, thrust_allocator.yaml and
+        reproduce.sh (one command; its metrics.json lands in ``sim/``)."""
+        config = self.spec.configuration(configuration)
+        drawn = draw_sample(self.spec, sample)
+        folder.mkdir(parents=True, exist_ok=True)
+        header = (f'# {run_id(sample, configuration)}: sample {sample} of campaign '
+                  f'{self.spec.name} (seed {self.spec.seed}), as `tiltrov campaign` ran it\n')
+        controller = self.controllers[configuration]
+        ros_controller = {'controller': controller.kind, 'gains': _plain(asdict(controller.gains)),
+                          'switching': _plain(asdict(controller.switching))}
+        files = {
+            'scenario.yaml': drawn.document,
+            'wrench_controller.yaml': {'wrench_controller': {'ros__parameters': ros_controller}},
+            'thrust_allocator.yaml': {'thrust_allocator': {
+                'ros__parameters': _plain(asdict(self.allocators[configuration]))}},
+        }
+        written = []
+        for name, doc in files.items():
+            path = folder / name
+            path.write_text(header + yaml.safe_dump(doc, sort_keys=False), encoding='utf-8')
+            written.append(path)
+        command = reproduce_command(config)
+        script = folder / 'reproduce.sh'
+        script.write_text(f'#!/bin/sh\n{header}cd "$(dirname "$0")" && exec {command} "$@"\n',
+                          encoding='utf-8')
+        script.chmod(0o755)
+        return [*written, script]
+
+
+def reproduce_command(config: Configuration) -> str:
+    """The ``tiltrov sim`` command of a run, from inside its exported folder."""
+    return shlex.join(['tiltrov', 'sim', '--scenario', 'scenario.yaml',
+                       '--controller', config.controller, '--allocator', config.allocator,
+                       '--controller-file', 'wrench_controller.yaml',
+                       '--allocator-file', 'thrust_allocator.yaml', '--out', 'sim'])
+
+
+def _plain(values: dict[str, Any]) -> dict[str, Any]:
+    """Tuples as lists, for YAML and for the parameter parsers."""
+    return {k: list(v) if isinstance(v, tuple) else v for k, v in values.items()}

@@ -1,0 +1,100 @@
+"""The stack's vocabulary: frames, joints, degrees of freedom, topics, nodes, run modes.
+
+The one definition of each name (docs/nodes.md lists them with their
+messages): the nodes, the launcher, the bag tools, the analysis and the tests
+import them from here. Pure Python, no ROS.
+
+Topic names are relative (a namespace pushed on the stack applies to them),
+except ``/clock`` and ``/diagnostics``, which ROS keeps global.
+"""
+
+from __future__ import annotations
+
+# --------------------------------------------------------------------------- frames
+
+#: Earth frame, NED (Fossen; the paper), and body frame, FRD.
+FRAME_EARTH = 'odom_ned'
+FRAME_BODY = 'base_link_frd'
+
+# --------------------------------------------------------------------------- joints
+
+#: The four thrusters (eq. (4)): 1 front-left, 2 front-right, 3 rear-right, 4 rear-left.
+THRUSTERS = ('thruster_1', 'thruster_2', 'thruster_3', 'thruster_4')
+#: The two tilt servos: alpha turns thrusters 1 and 2, beta turns 3 and 4.
+TILTS = ('tilt_front', 'tilt_rear')
+#: The servos as metrics and tables name them (same order as TILTS).
+SERVOS = ('front', 'rear')
+
+# --------------------------------------------------------------------------- DOFs
+
+#: eta: position in NED and ZYX Euler angles.
+DOF_NAMES = ('x', 'y', 'z', 'roll', 'pitch', 'yaw')
+DOF_UNITS = ('m', 'm', 'm', 'rad', 'rad', 'rad')
+#: tau: body force (X Y Z) and moment (K M N), as ``wrench_cmd`` carries it.
+WRENCH_DOFS = ('X', 'Y', 'Z', 'K', 'M', 'N')
+WRENCH_UNITS = ('N', 'N', 'N', 'N m', 'N m', 'N m')
+
+# --------------------------------------------------------------------------- topics
+
+ODOM = 'odom'
+JOINT_STATES = 'joint_states'
+SETPOINT = 'setpoint'
+SETPOINT_VELOCITY = 'setpoint_velocity'
+WRENCH_CMD = 'wrench_cmd'
+TILT_REQUEST = 'tilt_request'
+THRUST_CMD = 'thrust_cmd'
+TILT_CMD = 'tilt_cmd'
+WRENCH_ACHIEVED = 'wrench_achieved'
+CLOCK = '/clock'
+DIAGNOSTICS = '/diagnostics'
+#: Key of a node's last /diagnostics status, sent as it stops (value 'true'): a recording
+#: of the whole run without it may lack the node's last messages.
+FINAL_STATUS_KEY = 'final'
+
+#: Every topic of the stack -> its ROS 2 type, in the order the stack publishes
+#: them within a step and a tick.
+STACK_TOPICS: dict[str, str] = {
+    ODOM: 'nav_msgs/msg/Odometry',
+    JOINT_STATES: 'sensor_msgs/msg/JointState',
+    CLOCK: 'rosgraph_msgs/msg/Clock',
+    SETPOINT_VELOCITY: 'geometry_msgs/msg/TwistStamped',
+    SETPOINT: 'geometry_msgs/msg/PoseStamped',
+    TILT_REQUEST: 'sensor_msgs/msg/JointState',
+    WRENCH_CMD: 'geometry_msgs/msg/WrenchStamped',
+    WRENCH_ACHIEVED: 'geometry_msgs/msg/WrenchStamped',
+    TILT_CMD: 'sensor_msgs/msg/JointState',
+    THRUST_CMD: 'sensor_msgs/msg/JointState',
+    DIAGNOSTICS: 'diagnostic_msgs/msg/DiagnosticArray',
+}
+
+# --------------------------------------------------------------------------- nodes
+
+#: Node names, which are also the executables' names.
+PLANT = 'plant_simulator'
+CONTROLLER = 'wrench_controller'
+ALLOCATOR = 'thrust_allocator'
+REFERENCE = 'reference_publisher'
+RECORDER = 'bag_recorder'
+
+# --------------------------------------------------------------------------- modes
+
+#: The stack's timing: deterministic and as fast as possible, or on the wall clock.
+LOCKSTEP = 'lockstep'
+REALTIME = 'realtime'
+MODES = (LOCKSTEP, REALTIME)
+#: The allocator's modes (``ThrustAllocator(mode=...)``); robust is the default.
+ALLOCATOR_MODES = ('robust', 'paper')
+
+
+def normalize_namespace(namespace: str) -> str:
+    """``robot1``, ``/robot1/`` -> ``/robot1``; ``''`` and ``/`` -> ``''`` (none)."""
+    namespace = namespace.strip().strip('/')
+    return f'/{namespace}' if namespace else ''
+
+
+def join_namespace(namespace: str, name: str) -> str:
+    """Absolute name of ``name`` in ``namespace`` (absolute names are kept)."""
+    if name.startswith('/'):
+        return name
+    namespace = namespace.rstrip('/')
+    return f'{namespace}/{name}' if namespace else f'/{name}'

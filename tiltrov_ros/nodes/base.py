@@ -1,0 +1,617 @@
+"""The base of the stack's nodes: construction, diagnostics, the callback guard,
+input validation with rejection counts, and guarded publishers.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Callable, Sequence
+import functools
+import sys
+import time
+from typing import Any, ClassVar, TypeVar
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy.clock import Clock
+from rclpy.clock_type import ClockType
+from rclpy.context import Context
+from rclpy.duration import Duration
+from rclpy.exceptions import (
+    InvalidParameterTypeException,
+    InvalidParameterValueException,
+)
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile
+from rclpy.serialization import deserialize_message
+from rclpy.subscription import Subscription
+
+from tiltrov_ros.core import validation
+from tiltrov_ros.core.errors import ParameterError
+from tiltrov_ros.core.names import CLOCK, DIAGNOSTICS, FINAL_STATUS_KEY
+from tiltrov_ros.core.paramtable import Param, ParamTable
+from tiltrov_ros.core.timebase import NS_PER_S
+from tiltrov_ros.core.validation import MALFORMED, InvalidInput, StampBounds
+
+from .conversions import message_is_finite
+from .parameters import Overrides, allowed_text, as_parameters, declare, parameter_source
+from .qos import RELIABLE_QOS
+from .simclock import install as install_time_source
+
+#: s: repeated warnings from callbacks are throttled to one per this period.
+THROTTLE = 5.0
+#: s (wall): period of the /diagnostics messages.
+DIAGNOSTICS_PERIOD = 1.0
+#: s (wall): how often a node that waits for the recorder checks the graph, and
+#: how long it waits at most before it publishes anyway (``wait_for_recorder``).
+RECORDER_POLL = 0.02
+RECORDER_WAIT = 10.0
+#: s (wall): how long a node that stops waits at most for its readers to acknowledge
+#: its last messages (below the launcher's SIGINT timeout, stack/supervisor.py). A
+#: reader that fell behind (the recorder on a loaded machine) asks for what it missed
+#: when the writer's next heartbeat comes, up to 3 s later (Fast DDS): a few of those.
+DELIVERY_WAIT = 10.0
+#: Characters of a rejection's detail in a log line (the strings of a message inside it
+#: are already cut by core/validation.shown): a log line stays bounded.
+MAX_DETAIL = 300
+#: DiagnosticStatus levels as ints (the message field is a byte).
+OK, WARN, ERROR = 0, 1, 2
+
+#: ``wait_for_recorder`` (stack nodes; ``tiltrov launch --record`` sets it in lockstep).
+RECORDER_HOLD = ParamTable('recorder hold', [
+    Param('wait_for_recorder', 'str', '', 'name of the bag recorder node: publish nothing '
+          f'until it reads every topic of this node (at most {RECORDER_WAIT:g} s); empty: do '
+          'not wait. tiltrov launch --record sets it in lockstep.', read_only=True),
+])
+#: ``stamp_max_future``, ``stamp_max_age``: input stamps against the node's clock.
+STAMP_BOUNDS = ParamTable('input stamps', [
+    Param('stamp_max_future', 'float', 0.5, "input stamps more than this ahead of the node's "
+          'clock are rejected (sim time: /clock, the plant its own; not checked on system '
+          'time); 0: not checked', 's', low=0.0, high=1e6),
+    Param('stamp_max_age', 'float', 5.0, "input stamps more than this behind the node's clock "
+          'are rejected; 0: not checked', 's', low=0.0, high=1e9),
+])
+
+
+def steady_clock() -> Clock:
+    """A monotonic wall clock for timeouts and diagnostics (independent of sim time)."""
+    return Clock(clock_type=ClockType.STEADY_TIME)
+
+
+# --------------------------------------------------------------------------- the base node
+
+F = TypeVar('F', bound=Callable[..., Any])
+
+
+def _callback_failed(node: TiltrovNode, name: str, exc: Exception) -> None:
+    node.callback_errors += 1
+    try:
+        node.on_callback_error(name, exc)
+    except Exception as inner:  # even the error handler must not escape
+        node.get_logger().error(f'error handler failed: {inner!r}',
+                                throttle_duration_sec=THROTTLE)
+
+
+def guarded(method: F) -> F:
+    """Wrap a callback so an exception is logged and counted, never raised.
+
+    An exception escaping a callback would stop the executor (and, in the
+    single-process launcher, every node with it). The node's
+    :meth:`TiltrovNode.on_callback_error` decides what safe thing to do.
+    """
+
+    @functools.wraps(method)
+    def wrapper(self: TiltrovNode, *args: Any, **kwargs: Any) -> Any:
+        try:
+            return method(self, *args, **kwargs)
+        except Exception as exc:  # the executor must survive anything a callback does
+            _callback_failed(self, method.__name__, exc)
+            return None
+
+    return wrapper  # type: ignore[return-value]
+
+
+def input_callback(topic: str) -> Callable[[F], F]:
+    """Decorate the subscription callback of ``topic``: validation plus :func:`guarded`.
+
+    An :class:`~tiltrov_ros.core.validation.InvalidInput` raised inside is a
+    rejection of the message (:meth:`TiltrovNode.reject_input`: counted per
+    topic and reason, logged, and :meth:`TiltrovNode.on_rejected` may publish a
+    safe answer); any other exception is a callback error, as in :func:`guarded`.
+    """
+
+    def decorate(method: F) -> F:
+        @functools.wraps(method)
+        def wrapper(self: TiltrovNode, msg: Any) -> Any:
+            self._input_stamp = None
+            try:
+                return method(self, msg)
+            except InvalidInput as bad:
+                try:
+                    self.reject_input(topic, bad, self._input_stamp)
+                except Exception as exc:
+                    _callback_failed(self, method.__name__, exc)
+            except Exception as exc:  # the executor must survive anything a callback does
+                _callback_failed(self, method.__name__, exc)
+            return None
+
+        return wrapper  # type: ignore[return-value]
+
+    return decorate
+
+
+class SafePublisher:
+    """A publisher that never sends NaN or infinity (docs/reliability.md).
+
+    A message with a non-finite float is not published: the node counts it
+    (``unsafe_outputs`` on /diagnostics, ERROR level), logs it, and publishes
+    what ``safe(msg)`` returns instead (the node's safe command), if anything.
+    ``published`` counts the messages sent.
+    """
+
+    def __init__(self, node: TiltrovNode, msg_type: Any, topic: str, qos: QoSProfile,
+                 safe: Callable[[Any], Any | None] | None = None) -> None:
+        self.node = node
+        self.topic = topic
+        self.publisher = node.create_publisher(msg_type, topic, qos)
+        self._safe = safe
+        self.published = 0
+
+    def publish(self, msg: Any) -> bool:
+        """Publish ``msg`` if it is finite, else its safe replacement; True if ``msg`` went
+        (or is held until the recorder reads this topic, see ``wait_for_recorder``)."""
+        if self.node.hold_output(self, msg):
+            return True
+        if message_is_finite(msg):
+            self.publisher.publish(msg)
+            self.published += 1
+            return True
+        self.node.unsafe_output(self.topic)
+        replacement = self._safe(msg) if self._safe is not None else None
+        if replacement is not None and message_is_finite(replacement):
+            self.publisher.publish(replacement)
+            self.published += 1
+        return False
+
+    def get_subscription_count(self) -> int:
+        return int(self.publisher.get_subscription_count())
+
+    def wait_for_all_acked(self, timeout: Any) -> bool:
+        return bool(self.publisher.wait_for_all_acked(timeout))
+
+
+class TiltrovNode(Node):
+    """Base of the stack nodes: construction options, diagnostics, error handling,
+    input validation and guarded publishers.
+
+    Parameters
+    ----------
+    node_name : str
+        Default name of the node.
+    namespace : str, optional
+        Pushed on every relative topic name.
+    context : rclpy Context, optional
+        For in-process tests and the single-process launcher.
+    cli_args : list of str, optional
+        Node-local ROS arguments, e.g. ``['--ros-args', '--params-file', path]``.
+    parameter_overrides : mapping or list of Parameter, optional
+        Values that win over parameter files.
+    """
+
+    #: The stack's nodes publish /diagnostics and may hold their outputs for the
+    #: recorder (:data:`RECORDER_HOLD`); the recorder itself does neither.
+    stack_node: ClassVar[bool] = True
+    #: The node subscribes to /clock itself and rejects bad samples there (the time
+    #: source then drops them without counting them a second time).
+    reads_clock: ClassVar[bool] = False
+
+    def __init__(self, node_name: str, *, namespace: str | None = None,
+                 context: Context | None = None, cli_args: Sequence[str] | None = None,
+                 parameter_overrides: Overrides = None) -> None:
+        super().__init__(node_name, namespace=namespace, context=context,
+                         cli_args=list(cli_args) if cli_args is not None else None,
+                         parameter_overrides=as_parameters(parameter_overrides))
+        #: Where parameter files are named (error messages say which file set a value).
+        self._source_args = [*(cli_args or ()), *sys.argv]
+        self.callback_errors = 0
+        self.steady = steady_clock()
+        self._diagnostics_pub = (self.create_publisher(DiagnosticArray, DIAGNOSTICS,
+                                                       RELIABLE_QOS)
+                                 if self.stack_node else None)
+        self._diagnostics_msg = DiagnosticArray()
+        #: (topic, reason) -> messages rejected (see core/validation.py).
+        self.rejections: Counter[tuple[str, str]] = Counter()
+        #: topic -> outgoing messages withheld for a non-finite value.
+        self.unsafe: Counter[str] = Counter()
+        self.stamp_bounds = StampBounds()
+        self._input_stamp: int | None = None
+        self._reject_log: dict[tuple[str, str], tuple[int, int]] = {}
+        self._rejected_at_last_report = 0
+        self._safe_publishers: list[SafePublisher] = []
+        #: Topics that must have one source (the plant's); more are named on /diagnostics.
+        self.single_source: list[str] = []
+        self._sources_reported: dict[str, tuple[str, ...]] = {}
+        #: rclpy's time source with each /clock sample checked (nodes/simclock.py).
+        self.time_source = install_time_source(self)
+        if self.stack_node and self.on_sim_time():
+            self.expect_single_source(CLOCK)
+        self.add_on_set_parameters_callback(self._refuse_fixed)
+        # Lockstep with a recorder (the launcher sets it with --record): hold this
+        # node's outputs, in order, until the recorder reads every one of its topics.
+        # The stack's writers are VOLATILE, so what goes out before the recorder has
+        # matched a writer is not recorded; a node started again mid-run (--respawn)
+        # is otherwise discovered by the plant first and by the recorder up to
+        # seconds later (no multicast), while lockstep runs on.
+        self.recorder_node = (str(declare(self, RECORDER_HOLD)['wait_for_recorder'])
+                              if self.stack_node else '')
+        self._held: list[tuple[SafePublisher, Any]] = []
+        self._holding = bool(self.recorder_node)
+        self._hold_since = time.monotonic()
+        self._hold_timer = (self.create_timer(RECORDER_POLL, self._check_recorder,
+                                              clock=self.steady)
+                            if self._holding else None)
+
+    def declare_parameter(self, name: str, value: Any = None,
+                          descriptor: ParameterDescriptor | None = None,
+                          ignore_override: bool = False) -> Parameter:
+        """rclpy's, but a value of the wrong type or out of range (from a parameter
+        file or an override) raises :class:`ParameterError` naming the parameter, the
+        value, the allowed range and the file it came from."""
+        try:
+            return super().declare_parameter(name, value, descriptor, ignore_override)
+        except (InvalidParameterTypeException, InvalidParameterValueException) as exc:
+            given = getattr(self, '_parameter_overrides', {}).get(name)
+            got = given.value if given is not None else value
+            raise ParameterError(
+                name, f'got {got!r}; allowed: {allowed_text(descriptor, value)}',
+                source=parameter_source(name, self.get_name(), self._source_args)) from exc
+
+    # -- hooks for subclasses ---------------------------------------------------
+
+    def diagnostic_status(self) -> tuple[int, str, dict[str, Any]]:
+        """(level, message, key values) for /diagnostics; subclasses extend it."""
+        return OK, 'ok', {}
+
+    def on_callback_error(self, callback: str, exc: Exception) -> None:
+        """Called when a callback raised; subclasses publish a safe command too."""
+        self.get_logger().error(f'{callback} failed: {exc!r}', throttle_duration_sec=THROTTLE)
+
+    def on_rejected(self, topic: str, bad: InvalidInput, stamp: int | None) -> None:
+        """Called after a message of ``topic`` was rejected; ``stamp`` is its stamp (ns)
+        when the stamp itself was valid, else None. Subclasses answer a rejected
+        tick with their safe command here, stamped by :meth:`safe_stamp`, and change
+        nothing else (no state, no cached answer)."""
+
+    def safe_stamp(self, stamp: int, newest_valid: int | None, period: int) -> int:
+        """The stamp of the safe answer to a rejected message stamped ``stamp``: never
+        later than the node's own last good time, so that a rejected message cannot
+        push a stamp ahead of the real ones (downstream nodes keep the latest command
+        by stamp). That time is the node's clock (sim time); while it is unknown, the
+        newest valid input's stamp ``newest_valid`` plus one control ``period``."""
+        now = self.clock_ns()
+        if now is None and newest_valid is not None:
+            now = newest_valid + period
+        return stamp if now is None else min(stamp, now)
+
+    # -- input validation -------------------------------------------------------
+
+    def declare_stamp_bounds(self) -> None:
+        """Declare :data:`STAMP_BOUNDS` (s, run-time changeable)."""
+        bounds = declare(self, STAMP_BOUNDS)
+        self.stamp_bounds = StampBounds.from_seconds(bounds['stamp_max_future'],
+                                                     bounds['stamp_max_age'])
+        self.add_post_set_parameters_callback(self._apply_stamp_bounds)
+
+    def _apply_stamp_bounds(self, parameters: list[Parameter]) -> None:
+        if any(p.name in ('stamp_max_future', 'stamp_max_age') for p in parameters):
+            self.stamp_bounds = StampBounds.from_seconds(
+                self.get_parameter('stamp_max_future').value,
+                self.get_parameter('stamp_max_age').value)
+
+    # -- watchdogs ---------------------------------------------------------------
+
+    def input_age_ns(self, stamp: int, received: int) -> int:
+        """How old an input stamped ``stamp`` that arrived at steady time ``received`` is:
+        on sim time, by ``/clock`` (0 before the first one: sim time is not running);
+        on system time, the wall time since it arrived."""
+        if self.on_sim_time():
+            now = self.clock_ns()
+            return 0 if now is None else now - stamp
+        return self.steady_ns() - received
+
+    def on_sim_time(self) -> bool:
+        return bool(getattr(self.get_clock(), 'ros_time_is_active', False))
+
+    def estimated_now_ns(self, stamp: int, received: int, period: int) -> int:
+        """The stamp for a watchdog's output: sim time now on /clock, else ``stamp``
+        plus the wall time since it arrived; after ``stamp``, and never a multiple of
+        ``period`` (a control tick), so that no answer to a real tick, which downstream
+        nodes cache by stamp, is ever confused with it."""
+        now = self.clock_ns()
+        if now is None:
+            now = stamp + self.steady_ns() - received
+        now = max(now, stamp + 1)
+        return now + 1 if now % period == 0 else now
+
+    def clock_ns(self) -> int | None:
+        """The clock input stamps are checked against, ns: sim time when the node
+        runs on ``/clock`` (``use_sim_time``, as ``tiltrov launch`` starts it).
+
+        None (stamps not checked against a clock) on system time, and on sim time
+        before the first ``/clock`` message (ROS time 0 means "not initialised"):
+        the stack stamps with sim time, which the wall clock says nothing about.
+        """
+        clock = self.get_clock()
+        if not getattr(clock, 'ros_time_is_active', False):
+            return None
+        ns = int(clock.now().nanoseconds)
+        return ns if ns > 0 else None
+
+    def check_header(self, header: Any, frame: str | None) -> int:
+        """The header's stamp (ns), checked against :meth:`clock_ns` and
+        :attr:`stamp_bounds`, then its ``frame_id`` against ``frame`` (None: any).
+
+        Raises InvalidInput. Once the stamp is known to be valid, a later
+        rejection of the same message passes it to :meth:`on_rejected`.
+        """
+        ns = validation.check_stamp(header.stamp.sec, header.stamp.nanosec, self.clock_ns(),
+                                    self.stamp_bounds)
+        self._input_stamp = ns
+        if frame is not None:
+            validation.check_frame(header.frame_id, frame)
+        return ns
+
+    def create_input_subscription(self, msg_type: Any, topic: str,
+                                  callback: Callable[[Any], Any], qos: QoSProfile
+                                  ) -> Subscription:
+        """A subscription of ``topic`` that decodes what it receives itself (a raw
+        subscription and :meth:`decode`): bytes that do not decode as ``msg_type``
+        are rejected as ``malformed`` (rclpy's typed subscriptions drop them without
+        a trace); a message that decodes goes to ``callback``, an
+        :func:`input_callback`."""
+
+        def on_bytes(data: bytes) -> None:
+            msg = self.decode(msg_type, topic, data)
+            if msg is not None:
+                callback(msg)
+
+        return self.create_subscription(msg_type, topic, on_bytes, qos, raw=True)
+
+    def decode(self, msg_type: Any, topic: str, data: bytes) -> Any | None:
+        """``data`` (serialized CDR) as a ``msg_type`` message, or None when it does not
+        decode (truncated, garbage): then rejected as ``malformed`` (counted, logged)."""
+        try:
+            return deserialize_message(data, msg_type)
+        except Exception:   # rclpy raises RMWError (Fast CDR: not enough bytes, ...)
+            self.reject_malformed(topic, msg_type, data)
+            return None
+
+    def reject_malformed(self, topic: str, msg_type: Any, data: bytes) -> None:
+        """Reject ``data`` received on ``topic``: not a serialized ``msg_type``."""
+        try:
+            name = f'{msg_type.__module__.split(".")[0]}/msg/{msg_type.__name__}'
+            self.reject_input(topic, InvalidInput(
+                MALFORMED, f'{len(data)} bytes that do not decode as {name}'))
+        except Exception as exc:  # the executor must survive anything a sample holds
+            _callback_failed(self, 'reject_malformed', exc)
+
+    def reject_input(self, topic: str, bad: InvalidInput, stamp: int | None = None) -> None:
+        """Count a rejected message of ``topic``, log it (at most once per THROTTLE
+        seconds per topic and reason, with the number left unlogged), and call
+        :meth:`on_rejected`."""
+        key = (topic, bad.reason)
+        self.rejections[key] += 1
+        now = self.steady_ns()
+        last, quiet = self._reject_log.get(key, (None, 0))
+        if last is None or now - last >= THROTTLE * NS_PER_S:
+            more = f' ({quiet} more since the last report)' if quiet else ''
+            detail = bad.detail if len(bad.detail) <= MAX_DETAIL else (
+                f'{bad.detail[:MAX_DETAIL]}... (cut)')
+            self.get_logger().warning(f'rejected a {topic} message ({bad.reason}): '
+                                      f'{detail}{more}')
+            self._reject_log[key] = (now, 0)
+        else:
+            self._reject_log[key] = (last, quiet + 1)
+        self.on_rejected(topic, bad, stamp)
+
+    @property
+    def rejected_messages(self) -> int:
+        """Messages rejected so far, every topic and reason."""
+        return sum(self.rejections.values())
+
+    # -- output guard -----------------------------------------------------------
+
+    def create_safe_publisher(self, msg_type: Any, topic: str, qos: QoSProfile,
+                              safe: Callable[[Any], Any | None] | None = None
+                              ) -> SafePublisher:
+        """A :class:`SafePublisher`: never NaN or infinity on ``topic``."""
+        pub = SafePublisher(self, msg_type, topic, qos, safe)
+        self._safe_publishers.append(pub)
+        return pub
+
+    def hold_output(self, publisher: SafePublisher, msg: Any) -> bool:
+        """Keep ``msg`` for later while waiting for the recorder; True if kept."""
+        if self._holding:
+            self._held.append((publisher, msg))
+        return self._holding
+
+    def recorder_reads_every_topic(self) -> bool:
+        """The recorder's subscription is in the graph on every guarded topic of this
+        node, and every subscription there is matched with this node's writer."""
+        for pub in self._safe_publishers:
+            infos = self.get_subscriptions_info_by_topic(pub.publisher.topic_name)
+            if not any(info.node_name == self.recorder_node for info in infos):
+                return False
+            if pub.get_subscription_count() < len(infos):
+                return False
+        return True
+
+    def _check_recorder(self) -> None:
+        waited = time.monotonic() - self._hold_since
+        ready = self.recorder_reads_every_topic()
+        if not ready and waited < RECORDER_WAIT:
+            return
+        if self._hold_timer is not None:
+            self._hold_timer.cancel()
+            self.destroy_timer(self._hold_timer)
+            self._hold_timer = None
+        self._holding = False
+        held, self._held = self._held, []
+        if ready:
+            self.get_logger().info(f'{self.recorder_node} reads every topic of this node '
+                                   f'after {waited:.2f} s; publishing {len(held)} held '
+                                   'messages')
+        else:
+            self.get_logger().warning(f'{self.recorder_node} does not read every topic of '
+                                      f'this node after {waited:.0f} s; publishing anyway '
+                                      f'({len(held)} held messages)')
+        for pub, msg in held:
+            pub.publish(msg)
+
+    def unsafe_output(self, topic: str) -> None:
+        """Count and log an outgoing message withheld for a non-finite value."""
+        self.unsafe[topic] += 1
+        self.get_logger().error(f'withheld a {topic} message with a non-finite value '
+                                f'({self.unsafe[topic]} so far); publishing the safe command',
+                                throttle_duration_sec=THROTTLE)
+
+    def wait_for_delivery(self, timeout: float = DELIVERY_WAIT) -> bool:
+        """Wait (at most ``timeout`` wall seconds in all) until every reliable reader has
+        acknowledged every message this node published (its guarded publishers and
+        /diagnostics). Called before the node's writers are destroyed: a writer's
+        unacknowledged samples go with it, so a reader that lags (the bag recorder on
+        a loaded machine) would lose the last ones."""
+        deadline = time.monotonic() + timeout
+        acked = True
+        publishers = [p.publisher for p in self._safe_publishers]
+        if self._diagnostics_pub is not None:
+            publishers.append(self._diagnostics_pub)
+        for pub in publishers:
+            left = max(deadline - time.monotonic(), 0.0)
+            acked = bool(pub.wait_for_all_acked(Duration(seconds=left))) and acked
+        return acked
+
+    def published_counts(self) -> dict[str, int]:
+        """Messages published per topic by the guarded publishers."""
+        return {pub.topic: pub.published for pub in self._safe_publishers}
+
+    # -- helpers ----------------------------------------------------------------
+
+    def start_diagnostics(self) -> None:
+        """Publish /diagnostics every DIAGNOSTICS_PERIOD wall seconds (call last in __init__)."""
+        self.create_timer(DIAGNOSTICS_PERIOD, self.publish_diagnostics, clock=self.steady)
+
+    def steady_ns(self) -> int:
+        return int(self.steady.now().nanoseconds)
+
+    def expect_single_source(self, *topics: str) -> None:
+        """``topics`` must have one publisher (the plant's odom, joint_states, /clock):
+        a second one (another simulator, a replay) is named on /diagnostics (WARN)
+        and logged once when it appears."""
+        self.single_source.extend(self.resolve_topic_name(t) for t in topics)
+
+    def extra_sources(self) -> dict[str, tuple[str, ...]]:
+        """Topic -> its publishers (node names), for the single-source topics with more
+        than one."""
+        found: dict[str, tuple[str, ...]] = {}
+        for topic in self.single_source:
+            names = tuple(sorted({f'{i.node_namespace.rstrip("/")}/{i.node_name}'
+                                  for i in self.get_publishers_info_by_topic(topic)}))
+            if len(names) > 1:
+                found[topic] = names
+            if names != self._sources_reported.get(topic, names[:1]) and len(names) > 1:
+                self.get_logger().warning(f'{len(names)} publishers of {topic}: '
+                                          f'{", ".join(names)}; one is expected')
+            self._sources_reported[topic] = names
+        return found
+
+    @guarded
+    def publish_diagnostics(self, final: bool = False) -> None:
+        """Publish this node's status; ``final``: the last one, sent as the node stops
+        (``final: true``): a recording of the whole run that lacks it may have lost the
+        node's last messages (bag/losses.py)."""
+        level, message, values = self.diagnostic_status()
+        for topic, names in self.extra_sources().items():
+            level = max(level, WARN)
+            message = f'{message}; {len(names)} publishers of {topic}: {", ".join(names)}'
+            values = {**values, f'publishers.{topic}': list(names)}
+        rejected = self.rejected_messages
+        if rejected > self._rejected_at_last_report:
+            level = max(level, WARN)
+            message = (f'{message}; {rejected - self._rejected_at_last_report} input '
+                       'message(s) rejected')
+        self._rejected_at_last_report = rejected
+        unsafe = sum(self.unsafe.values())
+        if self.callback_errors or unsafe:
+            level = max(level, ERROR)
+        if self.callback_errors:
+            message = f'{message}; {self.callback_errors} callback error(s)'
+        if unsafe:
+            message = f'{message}; {unsafe} non-finite output(s) withheld'
+        values = {**values, 'callback_errors': self.callback_errors,
+                  'rejected_messages': rejected}
+        if self.on_sim_time():
+            values['clock_jumps_back'] = self.time_source.jumps_back
+        values.update({f'rejected.{topic}.{reason}': n
+                       for (topic, reason), n in sorted(self.rejections.items())})
+        values.update({f'unsafe_outputs.{topic}': n for topic, n in sorted(self.unsafe.items())})
+        values.update({f'published.{topic}': n for topic, n in self.published_counts().items()})
+        if final:
+            values[FINAL_STATUS_KEY] = 'true'
+        status = DiagnosticStatus(
+            level=bytes([level]), name=f'{self.get_fully_qualified_name()}',
+            message=message, hardware_id='tiltrov',
+            values=[KeyValue(key=str(k), value=_text(v)) for k, v in values.items()])
+        msg = self._diagnostics_msg
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.status = [status]
+        if self._diagnostics_pub is not None:
+            self._diagnostics_pub.publish(msg)
+
+    def check_overrides(self) -> None:
+        """Warn about parameters given (file or -p) that this node does not have.
+
+        rclpy ignores them silently; a typo in a YAML file would otherwise go
+        unnoticed. Call after every parameter is declared.
+        """
+        given = getattr(self, '_parameter_overrides', {}) or {}
+        unknown = sorted(name for name in given if not self.has_parameter(name))
+        if unknown:
+            self.get_logger().warning(f'ignoring unknown parameter(s): {", ".join(unknown)}')
+
+    def _refuse_fixed(self, parameters: list[Parameter]) -> SetParametersResult:
+        """Run-time changes no node of the package applies, refused with the reason:
+        deleting a parameter (``ros2 param delete``: rclpy would undeclare it, and every
+        later set would fail until a restart) and ``use_sim_time`` (each node chose
+        its time source, subscriptions and timers at start)."""
+        for p in parameters:
+            if p.type_ == Parameter.Type.NOT_SET and self.has_parameter(p.name):
+                return self.reject(f'{p.name} cannot be deleted (set a value instead)')
+            if p.name == 'use_sim_time' and self.has_parameter('use_sim_time') and (
+                    p.value != self.get_parameter('use_sim_time').value):
+                return self.reject('use_sim_time is fixed at start (restart the node to '
+                                   'change it)')
+        return SetParametersResult(successful=True)
+
+    def reject(self, reason: str) -> SetParametersResult:
+        self.get_logger().warning(f'parameter change rejected: {reason}')
+        return SetParametersResult(successful=False, reason=reason)
+
+    def check_failed_thrusters(self, parameters: list[Parameter]) -> SetParametersResult:
+        """The verdict on a change that may set ``failed_thrusters`` (plant, allocator)."""
+        for p in parameters:
+            if p.name == 'failed_thrusters':
+                try:
+                    validation.failed_thruster_indices(p.value)
+                except ParameterError as exc:
+                    return self.reject(str(exc))
+        return SetParametersResult(successful=True)
+
+
+def _text(value: Any) -> str:
+    if isinstance(value, float):
+        return f'{value:.6g}'
+    if isinstance(value, (list, tuple)):
+        return '[' + ', '.join(_text(v) for v in value) + ']'
+    return str(value)

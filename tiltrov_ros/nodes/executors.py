@@ -1,0 +1,189 @@
+"""Executors and ``main``: how every node executable spins and ends."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+import os
+import re
+import signal
+import sys
+import threading
+
+import rclpy
+from rclpy.context import Context
+from rclpy.exceptions import (
+    InvalidNamespaceException,
+    InvalidNodeNameException,
+    ParameterException,
+)
+from rclpy.executors import (
+    Executor,
+    ExternalShutdownException,
+    MultiThreadedExecutor,
+    SingleThreadedExecutor,
+)
+import rclpy.logging
+from rclpy.signals import SignalHandlerOptions
+from rclpy.task import Future
+
+from tiltrov_ros.core.errors import ParameterError, TiltrovError
+
+from .base import TiltrovNode
+from .parameters import parameter_source
+
+#: Errors that stop a node at start-up with a message and exit code 1.
+STARTUP_ERRORS = (TiltrovError, ParameterException, ValueError, OSError,
+                  InvalidNodeNameException, InvalidNamespaceException)
+
+
+#: Executors the nodes can spin on (environment variable TILTROV_EXECUTOR).
+EXECUTORS = ('events', 'single', 'multi')
+DEFAULT_EXECUTOR = 'events'
+
+
+#: rcl's "Couldn't parse params file" error: the file and the parser's reason.
+_PARAMS_FILE_ERROR = re.compile(r"params file: '--params-file (?P<path>.*?)'\. Error: (?P<why>.*)",
+                                re.S)
+#: rcl's source locations appended to its messages (``, at /path/file.c:123``).
+_RCL_LOCATION = re.compile(r',? at \S+:\d+')
+
+
+def rcl_error_line(exc: Exception) -> str:
+    """One line for an error of ``rclpy.init`` (arguments rcl cannot use): the
+    parameter file and why it cannot be read, or rcl's message without its source
+    locations."""
+    text = ' '.join(_RCL_LOCATION.sub('', str(exc)).split())
+    text = text.removeprefix('failed to initialize rcl: ')
+    match = _PARAMS_FILE_ERROR.search(text)
+    if match is None:
+        return text
+    path, why = match['path'], match['why'].rstrip(' .,')
+    if not os.path.exists(path):
+        why = 'no such file'
+    elif not os.access(path, os.R_OK) or os.path.isdir(path):
+        why = 'not a readable file'
+    return f'cannot read parameter file {path}: {why}'
+
+
+def init(args: list[str] | None, name: str, *, signal_handlers: bool = True) -> bool:
+    """``rclpy.init(args)``; on arguments rcl refuses (an unreadable parameter file,
+    a malformed ``-p``) print one line naming the node and the file and return False.
+
+    rcl's own log line about it ("Failed to parse global arguments") is silenced:
+    the line printed here says more.
+    """
+    previous = rclpy.logging.get_logger_level('rcl')
+    rclpy.logging.set_logger_level('rcl', rclpy.logging.LoggingSeverity.FATAL)
+    try:
+        rclpy.init(args=args, signal_handler_options=(
+            SignalHandlerOptions.ALL if signal_handlers else SignalHandlerOptions.NO))
+    except (RuntimeError, ValueError) as exc:   # rclpy's RCLError is a RuntimeError
+        print(f'{name}: {rcl_error_line(exc)}', file=sys.stderr, flush=True)
+        return False
+    finally:
+        if rclpy.logging.get_logger_level('rcl') == rclpy.logging.LoggingSeverity.FATAL:
+            rclpy.logging.set_logger_level('rcl', previous)   # not set by --log-level
+    return True
+
+
+def make_executor(context: Context | None = None, kind: str | None = None) -> Executor:
+    """The executor the stack spins on.
+
+    ``events`` (default): rclpy's EventsExecutor (C++, shipped with Jazzy's rclpy
+    as ``rclpy.experimental``), several times faster per callback than the
+    Python executors, which rebuild a wait set over every entity of every node
+    (parameter services included) for each callback taken. ``single`` and
+    ``multi`` are rclpy's SingleThreadedExecutor and MultiThreadedExecutor.
+    ``kind`` None reads ``TILTROV_EXECUTOR``.
+    """
+    kind = kind or os.environ.get('TILTROV_EXECUTOR', DEFAULT_EXECUTOR)
+    if kind == 'events':
+        from rclpy.experimental import EventsExecutor
+        return EventsExecutor(context=context)
+    if kind == 'single':
+        return SingleThreadedExecutor(context=context)
+    if kind == 'multi':
+        return MultiThreadedExecutor(context=context)
+    raise ValueError(f'TILTROV_EXECUTOR={kind!r}; allowed: {", ".join(EXECUTORS)}')
+
+
+def spin_until(executor: Executor, context: Context, future: Future | None = None,
+               step: float = 0.5, stop: threading.Event | None = None) -> None:
+    """Spin until ``future`` is done (None: for ever), ``stop`` is set or the context
+    shuts down (Ctrl-C).
+
+    The wait is handed to the executor in slices of ``step`` seconds
+    (``spin_until_future_complete``), never event by event from Python: the
+    EventsExecutor then runs its loop in C++ (a ``None`` timeout does not
+    return there when the future completes, hence the slices).
+    """
+    while (context.ok() and (future is None or not future.done())
+           and (stop is None or not stop.is_set())):
+        if future is None:
+            executor.spin_once(timeout_sec=step)
+        else:
+            executor.spin_until_future_complete(future, timeout_sec=step)
+
+
+#: s (wall): the longest a stop signal waits for the spin to notice it.
+STOP_POLL = 0.2
+
+
+def main_loop(factory: Callable[[], TiltrovNode], args: list[str] | None, name: str, *,
+              until: Callable[[TiltrovNode], Future | None] | None = None) -> int:
+    """The ``main`` of every stack node: init, spin, end in order, always clean up.
+
+    ``until`` returns a future that ends the spin when done (the plant's end of
+    run). The run also ends on SIGINT or SIGTERM (Ctrl-C, the launcher). Either
+    way the node then publishes its final /diagnostics (its message counts) and
+    waits until its readers acknowledged everything it published
+    (:meth:`~tiltrov_ros.nodes.base.TiltrovNode.wait_for_delivery`) before its
+    writers go: a lagging reader (the recorder) loses nothing. Exit code 0.
+
+    A start-up error (an unreadable parameter file, an invalid parameter, a
+    wrong-type YAML value) is printed as one line naming the node and gives exit
+    code 1.
+    """
+    if not init(args, name, signal_handlers=False):
+        return 1
+    stop = threading.Event()
+
+    def on_signal(signum: int, frame: object) -> None:
+        stop.set()
+
+    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+    context = rclpy.get_default_context()
+    node: TiltrovNode | None = None
+    executor: Executor | None = None
+    code = 0
+    try:
+        node = factory()
+        executor = make_executor(context)
+        executor.add_node(node)
+        future = until(node) if until is not None else None
+        # Not executor.spin(): the EventsExecutor's does not return on a stop;
+        # spin_until checks the flag between slices.
+        spin_until(executor, context, future if future is not None else Future(),
+                   step=STOP_POLL, stop=stop)
+        node.publish_diagnostics(final=True)     # the final counts, for the recorder
+        node.wait_for_delivery()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except STARTUP_ERRORS as exc:
+        text = str(exc)
+        if isinstance(exc, ParameterError) and exc.source is None:
+            source = parameter_source(exc.name, name, list(args or sys.argv))
+            prefix = f'parameter {exc.name!r}'
+            if source and text.startswith(prefix):
+                text = f'{prefix} (in {source}){text[len(prefix):]}'
+        print(f'{name}: {text}', file=sys.stderr, flush=True)
+        code = 1
+    finally:
+        if executor is not None:
+            executor.shutdown()
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    return code

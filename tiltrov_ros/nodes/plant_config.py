@@ -1,0 +1,122 @@
+"""The ``plant_simulator`` node's parameters (:data:`PLANT_PARAMS`) and the configuration
+built from them (:class:`PlantConfig`): one line per parameter, validated once."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
+
+from tiltrov_ros.core.disturbances import Disturbances
+from tiltrov_ros.core.errors import ParameterError
+from tiltrov_ros.core.kinematics import quat_from_euler
+from tiltrov_ros.core.names import MODES, REALTIME
+from tiltrov_ros.core.params import RobotParams
+from tiltrov_ros.core.paramtable import UNSET, Param, ParamTable
+from tiltrov_ros.core.plant import Plant
+from tiltrov_ros.core.scenarios import InitialState, Scenario, ThrusterFault, load_scenario
+from tiltrov_ros.core.timebase import to_ns
+
+from .parameters import check, declare, declare_failed_thrusters, declare_robot
+
+if TYPE_CHECKING:
+    from .base import TiltrovNode
+
+#: The plant's own parameters (besides failed_thrusters, the stamp bounds and the robot).
+PLANT_PARAMS = ParamTable('plant_simulator', [
+    Param('mode', 'str', REALTIME, 'lockstep: as fast as possible, deterministic, waits at each '
+          'control tick for the thrust_cmd and tilt_cmd stamped with it; realtime: wall-clock '
+          'stepping', choices=MODES, read_only=True),
+    Param('real_time_factor', 'float', 1.0, 'realtime mode: sim seconds per wall second '
+          '(1.0 = wall clock)', '-', low=0.001, high=1000.0),
+    Param('step_size', 'float', 0.01, 'plant step h (RK4); the control period must be a '
+          'multiple of it', 's', low=1e-5, high=1.0, read_only=True),
+    Param('scenario', 'str', '', 'scenario name (config/scenarios/<name>.yaml) or path: '
+          'initial state, disturbances and robot overrides; empty: at rest at the origin, no '
+          'disturbance', read_only=True),
+    Param('com_error', 'floats', UNSET, "true center of gravity minus the nominal one, in "
+          "base_link_frd (the paper's disturbance); overrides the scenario's; unset: the "
+          "scenario's (or zero)", 'm', size=3, read_only=True),
+    Param('current', 'floats', UNSET, "mean ocean current in odom_ned; overrides the "
+          "scenario's; unset: the scenario's (or zero)", 'm/s', size=3, read_only=True),
+    Param('duration', 'float', 0.0, 'sim time at which the run ends (a whole number of '
+          'steps); 0: never', 's', low=0.0, high=1e9, read_only=True),
+    Param('exit_at_end', 'bool', False, 'exit the process (code 0) when duration is reached, '
+          'once every reader acknowledged the last messages', read_only=True),
+    Param('stall_timeout', 'float', 1.0, 'lockstep: wall seconds without the commands of a '
+          "tick before a stall is reported and the tick's state published again", 's',
+          low=0.01, high=3600.0),
+    Param('startup_subscribers', 'int', 1, 'odom readers to wait for before publishing the '
+          'initial state (realtime: before time starts); 0: start at once', low=0, high=1000,
+          read_only=True),
+    Param('startup_delay', 'float', 0.0, 'wall seconds to wait once the readers are there, so '
+          'that every other pair of endpoints (e.g. a bag recorder and the allocator) is '
+          'matched too', 's', low=0.0, high=60.0, read_only=True),
+    Param('command_timeout', 'float', 0.5, 'realtime: sim seconds without a thrust_cmd after '
+          'which the thrusters are commanded to zero (tilts held) until commands return; '
+          '0: off', 's', low=0.0, high=3600.0),
+])
+
+
+@dataclass(frozen=True)
+class PlantConfig:
+    """The plant node's parameters, validated."""
+
+    mode: str
+    real_time_factor: float
+    step_ns: int
+    control_period_ns: int
+    robot: RobotParams               # nominal robot, scenario overrides applied
+    disturbances: Disturbances
+    initial_state: InitialState
+    scenario: str                    # name, path or '' (none)
+    duration_ns: int                 # 0: no end
+    exit_at_end: bool
+    stall_timeout: float             # s, wall
+    startup_subscribers: int
+    startup_delay: float             # s, wall
+    command_timeout: float = 0.5     # s, sim time; 0: off
+    failed_thrusters: tuple[int, ...] = ()          # indices 0..3 (parameter)
+    faults: tuple[ThrusterFault, ...] = ()          # the scenario's
+
+    def build_plant(self) -> Plant:
+        """The plant at the initial state, as ``StackConfig.build_plant`` makes it."""
+        init = self.initial_state
+        return Plant(self.robot, self.disturbances, step_ns=self.step_ns,
+                     position=init.position, quaternion=quat_from_euler(*init.euler),
+                     nu=init.nu)
+
+
+def declare_parameters(node: TiltrovNode) -> PlantConfig:
+    """Declare the plant's parameters on ``node`` and return them validated."""
+    declared = declare(node, PLANT_PARAMS)
+    failed = declare_failed_thrusters(node)
+    node.declare_stamp_bounds()
+    robot, period = declare_robot(node)
+    node.check_overrides()
+
+    v = check(PLANT_PARAMS, declared)
+    scenario: Scenario | None = load_scenario(v['scenario']) if v['scenario'] else None
+    disturbances = scenario.disturbances if scenario is not None else Disturbances()
+    if v['com_error'] is not None:
+        disturbances = replace(disturbances, com_error=v['com_error'])
+    if v['current'] is not None:
+        disturbances = replace(disturbances, current=v['current'])
+    step_ns = to_ns(v['step_size'])
+    period_ns = to_ns(period)
+    if period_ns % step_ns:
+        raise ParameterError('control_period', f'got {period!r} s; allowed: a whole '
+                             f'multiple of step_size ({v["step_size"]!r} s)')
+    duration_ns = to_ns(v['duration'])
+    if duration_ns % step_ns:
+        raise ParameterError('duration', f'got {v["duration"]!r} s; allowed: 0 or a whole '
+                             f'number of steps ({v["step_size"]!r} s)')
+    return PlantConfig(
+        mode=v['mode'], real_time_factor=v['real_time_factor'], step_ns=step_ns,
+        control_period_ns=period_ns,
+        robot=scenario.robot(robot) if scenario is not None else robot,
+        disturbances=disturbances,
+        initial_state=scenario.initial_state if scenario is not None else InitialState(),
+        scenario=v['scenario'], duration_ns=duration_ns, exit_at_end=v['exit_at_end'],
+        stall_timeout=v['stall_timeout'], startup_subscribers=v['startup_subscribers'],
+        startup_delay=v['startup_delay'], command_timeout=v['command_timeout'],
+        failed_thrusters=failed, faults=scenario.faults if scenario is not None else ())

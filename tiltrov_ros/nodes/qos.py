@@ -1,0 +1,49 @@
+"""The QoS profiles of the stack's publishers and readers (docs/nodes.md, "Topics and QoS")."""
+
+from __future__ import annotations
+
+from rclpy.qos import (
+    DurabilityPolicy,
+    HistoryPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+    qos_profile_sensor_data,
+)
+
+from tiltrov_ros.core.names import LOCKSTEP
+
+#
+# Every publisher of the stack offers RELIABLE + VOLATILE with a KEEP_LAST
+# history: lockstep needs every command, odometry and clock sample (a lost one
+# is a stall), and the bag recorder subscribes RELIABLE to the stack topics
+# before their publishers exist (a BEST_EFFORT publisher would leave it
+# unmatched until its discovery poll re-subscribes, losing the start of the
+# run). A reader that tolerates loss asks for BEST_EFFORT (sensor data), which
+# matches a reliable writer: the controller's odometry in realtime mode does.
+# See docs/nodes.md, "Topics and QoS".
+
+#: Commands, setpoints, odometry, joint states: reliable, last 10. In lockstep at
+#: most control_period / step_size (5) odometry samples are in flight.
+RELIABLE_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.VOLATILE,
+                          history=HistoryPolicy.KEEP_LAST, depth=10)
+#: The stack's publishers: reliable, with a history deep enough that a sample a
+#: slow reader (the bag recorder on a loaded machine) has not acknowledged yet is
+#: still there to be resent: a KEEP_LAST writer drops its oldest sample when the
+#: history is full, acknowledged or not. In lockstep the plant publishes up to
+#: hundreds of steps per wall second; 1000 samples are seconds of them.
+PUBLISHER_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
+                           durability=DurabilityPolicy.VOLATILE,
+                           history=HistoryPolicy.KEEP_LAST, depth=1000)
+#: The reference publisher's own /clock reader: reliable, deep enough that a
+#: burst of lockstep steps is never overwritten before it is taken.
+CLOCK_READER_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
+                              durability=DurabilityPolicy.VOLATILE,
+                              history=HistoryPolicy.KEEP_LAST, depth=100)
+#: Readers that only want the latest sample (realtime odometry).
+SENSOR_QOS = qos_profile_sensor_data
+
+
+def reader_qos(mode: str) -> QoSProfile:
+    """Odometry reader profile: reliable in lockstep, sensor data in realtime."""
+    return RELIABLE_QOS if mode == LOCKSTEP else SENSOR_QOS
