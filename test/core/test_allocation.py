@@ -647,3 +647,29 @@ def test_infeasible_rows_is_the_allocators_own_test() -> None:
     assert infeasible_rows(req, ach, FMAX).all()
     ach[0, 2] = math.nan
     assert not infeasible_rows(req, ach, FMAX)[0]      # unknown: not counted
+
+
+def test_a_late_start_at_the_edge_gets_out_when_the_error_is_worth_the_travel() -> None:
+    """A late-started or restarted allocator: its first wrench, a pure heave with
+    no ``previous``, parks both pairs at -90 deg, where a backward push is out of
+    reach (its twin is 180 deg of servo travel away). A small push is left
+    undelivered (the travel would cost more error than it saves); a growing one,
+    as a controller's reaction to the drift makes it, sends one pair through
+    0 deg, and the answer is exact again, every step within the servo's reach."""
+    step = math.radians(7.5)
+    alloc = ThrustAllocator(L, D, FMAX, (-HALF_PI, HALF_PI), step)
+    first = alloc.allocate([0, 0, 5.0, 0, 0, 0])
+    assert first.feasible and np.allclose(np.abs(first.tilts), HALF_PI)
+    small = first
+    for _ in range(60):
+        small = alloc.allocate([-1.0, 0, 5.0, 0, 0, 0], small)
+    assert not small.feasible and small.achieved[2] == pytest.approx(5.0)
+    previous, results = first, []
+    for x in np.concatenate([np.linspace(0.0, -10.0, 41), np.full(40, -10.0)]):
+        previous = alloc.allocate([x, 0, 5.0, 0, 0, 0], previous)
+        results.append(previous)
+    tilts = np.array([first.tilts] + [r.tilts for r in results])
+    assert np.abs(np.diff(tilts, axis=0)).max() <= step * (1 + 1e-12)
+    assert 'transit' in [r.method for r in results]
+    assert results[-1].feasible and results[-1].achieved[0] == pytest.approx(-10.0)
+    assert all(r.feasible for r in results[-20:])
