@@ -74,7 +74,7 @@ Mode = Literal['paper', 'robust']
 
 #: Default per-DOF weights (X, Y, Z, K, M, N) of the wrench error in robust mode:
 #: depth and attitude first.
-DEFAULT_WEIGHTS = (1.0, 1.0, 10.0, 10.0, 10.0, 10.0)
+DEFAULT_WEIGHTS = (1.0, 1.0, 10.0, 10.0, 10.0, 1.0)
 #: Robust fallback: a tilt motion of 1 rad weighs like this fraction of
 #: max(|tau|, max_thrust) of weighted wrench error, so the servos do not chase
 #: differences that are tiny compared with the wrench.
