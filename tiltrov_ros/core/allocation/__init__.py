@@ -11,6 +11,7 @@ from tiltrov_ros.core.allocation.allocator import (
     allocate_sequence,
 )
 from tiltrov_ros.core.allocation.config import (
+    ALLOCATION,
     ALLOCATOR_YAML,
     AllocatorConfig,
     load_allocator_config,
@@ -23,6 +24,7 @@ from tiltrov_ros.core.allocation.results import (
 )
 
 __all__ = [
+    'ALLOCATION',
     'ALLOCATOR_YAML',
     'DEFAULT_WEIGHTS',
     'FEASIBILITY_RTOL',

@@ -2,19 +2,33 @@
 
 from __future__ import annotations
 
-from collections.abc import Collection, Mapping, Sequence
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass
-import math
 from pathlib import Path
 from typing import Any
 
 from tiltrov_ros.core.allocation.allocator import DEFAULT_WEIGHTS, Mode, ThrustAllocator
 from tiltrov_ros.core.errors import ParameterError
+from tiltrov_ros.core.names import ALLOCATOR_MODES
 from tiltrov_ros.core.params import RobotParams
+from tiltrov_ros.core.paramtable import SHIPPED, Param, ParamTable
 from tiltrov_ros.core.yamlfile import read_yaml
 from tiltrov_ros.paths import config_file
 
 ALLOCATOR_YAML = 'thrust_allocator.yaml'
+
+#: The allocator's parameters (the ``thrust_allocator`` section that ``tiltrov sim``
+#: reads and the node declares; defaults: the shipped file's): validated by
+#: :meth:`AllocatorConfig.from_mapping`, declared and documented from here.
+ALLOCATION = ParamTable('allocation', [
+    Param('mode', 'str', SHIPPED, 'robust: exact when attainable, else least weighted wrench '
+          'error; paper: Section 3 of the paper', choices=ALLOCATOR_MODES),
+    Param('max_tilt_step', 'float', SHIPPED, 'how far each tilt may move per control period; '
+          '<= 0: the servo reach (tilt_rate_limit x control_period)', 'rad', low=-1e6,
+          high=1e6),
+    Param('weights', 'floats', SHIPPED, 'robust mode: weights of the wrench error', 'per '
+          'component X Y Z K M N', size=6, low=0.0, low_open=True),
+])
 
 
 @dataclass(frozen=True)
@@ -35,24 +49,12 @@ class AllocatorConfig:
     def from_mapping(cls, values: Mapping[str, Any], *,
                      source: str | None = None) -> AllocatorConfig:
         """From the ``ros__parameters`` of ``thrust_allocator`` (other keys ignored)."""
-        mode = values.get('mode', 'robust')
-        if mode not in ('paper', 'robust'):
-            raise ParameterError('mode', f"got {mode!r}; allowed: 'robust', 'paper'",
-                                 source=source)
-        step = values.get('max_tilt_step', -1.0)
-        if isinstance(step, bool) or not isinstance(step, (int, float)) or math.isnan(step):
-            raise ParameterError('max_tilt_step', f'got {step!r}; allowed: a number of rad '
-                                 '(<= 0: the servo reach per control period)', source=source)
-        weights = values.get('weights', DEFAULT_WEIGHTS)
-        # Any sequence: a list from YAML, array('d') from the ROS parameter service.
-        if (isinstance(weights, (str, bytes)) or not isinstance(weights, Sequence)
-                or len(weights) != 6
-                or not all(isinstance(w, (int, float)) and not isinstance(w, bool)
-                           and math.isfinite(w) and w > 0 for w in weights)):
-            shown = list(weights) if isinstance(weights, Sequence) else weights
-            raise ParameterError('weights', f'got {shown!r}; allowed: 6 finite numbers > 0',
-                                 source=source)
-        return cls(mode, float(step), tuple(float(w) for w in weights))
+        # Any sequence of weights: a list from YAML, array('d') from the ROS parameter
+        # service. Keys of other tables (the node's) are ignored.
+        checked = ALLOCATION.complete(values, source=source, unknown=True,
+                                      defaults={'mode': 'robust', 'max_tilt_step': -1.0,
+                                                'weights': DEFAULT_WEIGHTS})
+        return cls(checked['mode'], checked['max_tilt_step'], tuple(checked['weights']))
 
     def tilt_step(self, robot: RobotParams, control_period: float) -> float:
         """max_tilt_step in rad, ``auto`` (<= 0) resolved from the servo rate."""
