@@ -64,7 +64,8 @@ def report_losses(bag: Path) -> bool:
     try:
         found = losses(bag)
     except TiltrovError as exc:
-        print(f'tiltrov launch: failed: the bag {bag} cannot be read: {exc}', file=sys.stderr)
+        print(f'tiltrov launch: failed: the recording lost data: the bag {bag} cannot be '
+              f'read: {exc}', file=sys.stderr)
         return True
     if not found:
         return False
