@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 import math
 
 from hypothesis import HealthCheck, given, settings
@@ -673,3 +674,20 @@ def test_a_late_start_at_the_edge_gets_out_when_the_error_is_worth_the_travel() 
     assert 'transit' in [r.method for r in results]
     assert results[-1].feasible and results[-1].achieved[0] == pytest.approx(-10.0)
     assert all(r.feasible for r in results[-20:])
+
+
+def test_from_tilts_moves_previous_to_the_measured_tilts_and_keeps_the_planner_state() -> None:
+    from tiltrov_ros.core.allocation import from_tilts, shortfall_tolerances
+    from tiltrov_ros.core.params import load_robot_params
+
+    alloc = ThrustAllocator(L, D, FMAX, max_tilt_step=math.radians(7.5))
+    start = from_tilts(None, [0.2, -0.1])
+    assert start.tilts.tolist() == [0.2, -0.1]
+    result = alloc.allocate([0, 0, 5.0, 0, 0, 0], start)
+    assert np.all(np.abs(result.tilts - [0.2, -0.1]) <= math.radians(7.5) + 1e-12)
+    moved = from_tilts(replace(result, target=(1.0, 1.0), stuck=3, method='transit'),
+                       [0.3, 0.4])
+    assert moved.tilts.tolist() == [0.3, 0.4]
+    assert (moved.target, moved.stuck, moved.method) == ((1.0, 1.0), 3, 'transit')
+    tolerances = shortfall_tolerances(load_robot_params())
+    np.testing.assert_allclose(tolerances, [0.4, 0.4, 0.4, 0.08, 0.08, 0.08])

@@ -18,9 +18,12 @@ from tiltrov_ros.core.allocation.config import (
 )
 from tiltrov_ros.core.allocation.results import (
     FEASIBILITY_RTOL,
+    SHORTFALL_FRACTION,
     AllocationResult,
     BatchResult,
+    from_tilts,
     infeasible_rows,
+    shortfall_tolerances,
 )
 
 __all__ = [
@@ -28,12 +31,15 @@ __all__ = [
     'ALLOCATOR_YAML',
     'DEFAULT_WEIGHTS',
     'FEASIBILITY_RTOL',
+    'SHORTFALL_FRACTION',
     'AllocationResult',
     'AllocatorConfig',
     'BatchResult',
     'Mode',
     'ThrustAllocator',
     'allocate_sequence',
+    'from_tilts',
     'infeasible_rows',
     'load_allocator_config',
+    'shortfall_tolerances',
 ]

@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import math
 import sys
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from tiltrov_ros.core.params import RobotParams
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -17,6 +19,15 @@ BoolArray = NDArray[np.bool_]
 #: ||achieved - requested|| <= FEASIBILITY_RTOL * max(||requested||, max_thrust).
 #: The closed form itself is exact to rounding (tests check 1e-9).
 FEASIBILITY_RTOL = 1e-6
+#: What counts as *short* for the robot (as opposed to ``feasible``, exact to
+#: rounding): a wrench component that misses by more than this fraction of a
+#: thruster's range, max_thrust for the forces and max_thrust x min(l, d) / 2 for
+#: the moments (0.4 N and 0.08 N m for the shipped robot). Below it the error is
+#: within what a real thruster resolves, and the steady pose offset it causes
+#: under the shipped PD gains (force / kp) is under 4.2 mm and 0.17 deg. The
+#: robust mode's trade of a millinewton of wrench for less servo motion while
+#: hovering (DEFAULT_MOTION_PENALTY) stays below it.
+SHORTFALL_FRACTION = 0.01
 
 
 @dataclass(frozen=True)
@@ -111,6 +122,26 @@ def tilts_only(prev: FloatArray) -> AllocationResult:
     z = np.zeros(6)
     return AllocationResult(np.zeros(4), float(prev[0]), float(prev[1]), z, True, z,
                             'previous', math.nan, 0.0)
+
+
+def shortfall_tolerances(robot: RobotParams, fraction: float = SHORTFALL_FRACTION
+                         ) -> FloatArray:
+    """Per component (X Y Z K M N) the shortfall above which a wrench counts as not
+    achieved for the robot (see :data:`SHORTFALL_FRACTION`)."""
+    force = fraction * robot.max_thrust
+    moment = force * min(robot.length, robot.width) / 2.0
+    return np.array([force] * 3 + [moment] * 3)
+
+
+def from_tilts(previous: AllocationResult | None, tilts: Sequence[float]) -> AllocationResult:
+    """``previous`` with its tilts replaced by ``tilts`` (the servos' measured angles):
+    the next allocation then moves the tilts least, and at most ``max_tilt_step``,
+    from where the servos are rather than from where they were told to go (the
+    paper: the servos "could not follow the change of the tilting angle exactly").
+    The robust mode's state (method, target, stuck) is kept."""
+    if previous is None:
+        return tilts_only(np.array([float(tilts[0]), float(tilts[1])]))
+    return replace(previous, tilt_front=float(tilts[0]), tilt_rear=float(tilts[1]))
 
 
 def norm(v: FloatArray) -> float:
