@@ -24,7 +24,7 @@ def _file(tmp_path: Path, **changes: Any) -> Path:
      '{file}: compare.controllers[0]: got \'pdd\'; allowed: pd, switching, pid'),
     ({'compare': {'allocators': ['fast']}}, [],
      "{file}: compare.allocators: parameter 'mode' (in {file}): got 'fast'; allowed: "
-     "'robust', 'paper'"),
+     "robust or paper"),
     ({'robot': {'tilt_rate_limit': {'uniform': [-10, 100]}}}, ['--samples', '40'],
      "parameter 'robot.tilt_rate_limit' (in {file} (sample "),
     ({}, ['--samples', '0'], '--samples must be >= 1, got 0'),

@@ -77,10 +77,13 @@ def test_station_keeping_is_the_documented_campaign() -> None:
         assert 0.0 <= p['current_speed'] <= 0.3 and 0.0 <= p['current_direction'] < 360.0
         assert 0.0 <= p['disturbances.com_error.magnitude'] <= 0.01
         assert 60.0 <= p['robot.tilt_rate_limit'] <= 150.0
-        assert abs(p['reference.pitch[0].value']) <= 20
-        assert abs(p['reference.yaw[0].value']) <= 60
-        for dof in 'xyz':
-            assert abs(p[f'reference.{dof}[0].value']) <= 0.5
+        limits = {'x': 1.0, 'y': 1.0, 'z': 0.5, 'pitch': 30.0, 'yaw': 90.0}
+        for dof, limit in limits.items():
+            assert abs(p[f'reference.{dof}[0].value']) <= limit
+            present = len(sample.document['reference'][dof]) == 1
+            assert present == (p[f'reference.{dof}[0].occurs'] == 1.0)
+            if present:
+                assert sample.document['reference'][dof][0]['at'] == 10.0
         scenario = sample.scenario()
         (key, rate), = scenario.robot_overrides
         assert key == 'tilt_rate_limit' and rate == pytest.approx(p[f'robot.{key}'] * DEG)
@@ -89,6 +92,23 @@ def test_station_keeping_is_the_documented_campaign() -> None:
 
 
 # --------------------------------------------------------------------------- samples
+
+
+def test_a_reference_term_with_a_probability_is_in_some_samples_only() -> None:
+    doc = {**GOOD, 'reference': {'x': [{'type': 'step', 'probability': 0.25, 'at': 1.0,
+                                        'value': {'uniform': [0.5, 1.0]}}]}}
+    samples = draw_samples(parse_campaign(doc, source='good.yaml'), 400)
+    present = [s for s in samples if s.document['reference']['x']]
+    assert 0.18 < len(present) / len(samples) < 0.32          # seeded: the same every run
+    for s in samples:           # drawn every time: the same columns, the value recorded
+        assert 0.5 <= s.params['reference.x[0].value'] <= 1.0
+        assert s.params['reference.x[0].occurs'] == (1.0 if s in present else 0.0)
+        final = s.scenario().reference.at(2.0)[0][0]
+        assert final == (s.params['reference.x[0].value'] if s in present else 0.0)
+    with pytest.raises(CampaignError, match=r'reference.x\[0\].probability'):
+        parse_campaign({**doc, 'reference': {'x': [{'type': 'step', 'probability': 2.0,
+                                                     'value': 1.0}]}}, source='good.yaml')
+
 
 
 def test_a_sample_depends_only_on_the_seed_and_its_index() -> None:

@@ -18,7 +18,7 @@ from pathlib import Path
 import sys
 from typing import Any
 
-from tiltrov_ros.core.allocation import load_allocator_config
+from tiltrov_ros.core.allocation import ALLOCATION, load_allocator_config
 from tiltrov_ros.core.controllers import (
     CONTROL_LAW,
     GAINS,
@@ -35,7 +35,7 @@ from .base import RECORDER_HOLD, STAMP_BOUNDS
 from .parameters import robot_defaults
 from .plant_config import PLANT_PARAMS
 from .reference_publisher import REFERENCE_PARAMS
-from .thrust_allocator import ALLOCATION, ALLOCATOR_PARAMS
+from .thrust_allocator import ALLOCATOR_PARAMS
 from .wrench_controller import CONTROLLER_PARAMS
 
 

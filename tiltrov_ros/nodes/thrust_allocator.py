@@ -45,6 +45,7 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
 from tiltrov_ros.core.allocation import (
+    ALLOCATION,
     SHORTFALL_FRACTION,
     AllocationResult,
     AllocatorConfig,
@@ -55,7 +56,6 @@ from tiltrov_ros.core.allocation import (
 from tiltrov_ros.core.errors import ParameterError
 from tiltrov_ros.core.names import (
     ALLOCATOR,
-    ALLOCATOR_MODES,
     FRAME_BODY,
     JOINT_STATES,
     THRUST_CMD,
@@ -67,7 +67,7 @@ from tiltrov_ros.core.names import (
     WRENCH_CMD,
     WRENCH_DOFS,
 )
-from tiltrov_ros.core.paramtable import SHIPPED, Param, ParamTable
+from tiltrov_ros.core.paramtable import Param, ParamTable
 from tiltrov_ros.core.scenarios import ThrusterFault, failed_at, load_scenario
 from tiltrov_ros.core.timebase import format_ns, seconds, to_ns
 from tiltrov_ros.core.validation import (
@@ -102,18 +102,6 @@ TILT_SOURCES = ('commanded', 'measured')
 WATCHDOG_PERIOD = 0.1
 BUFFER = 200
 
-#: The allocator's own configuration (the ``thrust_allocator`` section that ``tiltrov
-#: sim`` reads too; defaults: the shipped file's): declared and documented from here,
-#: validated by :meth:`~tiltrov_ros.core.allocation.AllocatorConfig.from_mapping`.
-ALLOCATION = ParamTable('allocation', [
-    Param('mode', 'str', SHIPPED, 'robust: exact when attainable, else least weighted wrench '
-          'error; paper: Section 3 of the paper', choices=ALLOCATOR_MODES),
-    Param('max_tilt_step', 'float', SHIPPED, 'how far each tilt may move per control period; '
-          '<= 0: the servo reach (tilt_rate_limit x control_period)', 'rad', low=-1e6,
-          high=1e6),
-    Param('weights', 'floats', SHIPPED, 'robust mode: weights of the wrench error', 'per '
-          'component X Y Z K M N', size=6, low=0.0, low_open=True),
-])
 #: The node's own parameters (besides the allocator's, failed_thrusters, the stamp
 #: bounds and the robot).
 ALLOCATOR_PARAMS = ParamTable('thrust_allocator', [

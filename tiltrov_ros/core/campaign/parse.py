@@ -228,9 +228,12 @@ class _Parser:
                 where = f'reference.{dof}[{i}]'
                 if not isinstance(entry, Mapping) or not isinstance(entry.get('type'), str):
                     raise self.fail(where, f'a term is a mapping with a type, got {entry!r}')
+                probability = (self.probability(entry, where) if 'probability' in entry
+                               else None)
                 terms.append(TermTemplate(entry['type'], tuple(
                     (str(k), self.dist(v, f'{where}.{k}'))
-                    for k, v in entry.items() if k != 'type')))
+                    for k, v in entry.items() if k not in ('type', 'probability')),
+                    probability))
             out.append((dof, tuple(terms)))
         return tuple(out)
 

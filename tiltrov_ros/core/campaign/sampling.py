@@ -146,12 +146,17 @@ class _Draw:
             entries = reference.get(dof, [])
             terms = [entries] if isinstance(entries, Mapping) else list(entries)
             for i, template in enumerate(templates):
+                occurs = True
+                if template.probability is not None:
+                    occurs = bool(self.rng.random() < template.probability)
+                    self.params[f'reference.{dof}[{i}].occurs'] = float(occurs)
                 term: dict[str, Any] = {'type': template.kind}
                 for key, dist in template.fields:
                     v = self.value(dist, f'reference.{dof}[{i}].{key}')
                     term[key] = v * to_doc if dof in _ANGLE_DOFS and key in TERM_UNIT_KEYS \
                         else v
-                terms.append(term)
+                if occurs:
+                    terms.append(term)
             reference[dof] = terms
         doc['reference'] = reference
 

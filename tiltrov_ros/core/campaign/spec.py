@@ -49,10 +49,12 @@ class Distribution:
 
 @dataclass(frozen=True)
 class TermTemplate:
-    """A reference term (scenario term types) whose numbers are distributions."""
+    """A reference term (scenario term types) whose numbers are distributions,
+    present in a sample with ``probability`` (None: always, nothing drawn for it)."""
 
     kind: str
     fields: tuple[tuple[str, Distribution], ...]
+    probability: float | None = None
 
 
 @dataclass(frozen=True)
