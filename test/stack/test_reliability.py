@@ -564,10 +564,12 @@ def test_a_recorder_behind_at_the_end_of_a_run_loses_nothing(ros: Any, tmp_path:
     what the recorder had not taken went with them: the last 8 s of every topic lost,
     exit code 0)."""
     bag = tmp_path / 'bag'
+    # The probe first: a lockstep run of 30 s can end before a reader created after the
+    # launch is matched (a loaded machine), and the probe would wait for ever.
+    watch = Probe(ros.node('clock_probe'), ['/clock'])
     launch = LaunchProcess(tmp_path, '--duration', '30', '--record', str(bag))
     try:
         pids = launch.wait_running()
-        watch = Probe(ros.node('clock_probe'), ['/clock'])
         assert ros.spin_until(lambda: bool(watch['/clock'])
                               and _latest_clock(watch) >= 22 * NS_PER_S, timeout=120.0)
         os.kill(pids['bag_recorder'], signal.SIGSTOP)
@@ -601,10 +603,12 @@ def test_a_recorder_still_behind_when_the_nodes_give_up_fails_the_launch(
     whose final report is missing, and ``tiltrov bag info`` says the same (before:
     exit code 0, the bag silently 8 s short)."""
     bag = tmp_path / 'bag'
+    # The probe first: a lockstep run of 30 s can end before a reader created after the
+    # launch is matched (a loaded machine), and the probe would wait for ever.
+    watch = Probe(ros.node('clock_probe'), ['/clock'])
     launch = LaunchProcess(tmp_path, '--duration', '30', '--record', str(bag))
     try:
         pids = launch.wait_running()
-        watch = Probe(ros.node('clock_probe'), ['/clock'])
         assert ros.spin_until(lambda: bool(watch['/clock'])
                               and _latest_clock(watch) >= 22 * NS_PER_S, timeout=120.0)
         os.kill(pids['bag_recorder'], signal.SIGSTOP)
