@@ -28,7 +28,7 @@ from tiltrov_ros.bag.repair import REPAIRED_KEY, problem, repair
 from tiltrov_ros.bag.writer import BagWriter
 from tiltrov_ros.cli import main as tiltrov
 from tiltrov_ros.core.errors import BagError
-from tiltrov_ros.nodes.bag_recorder import recorder_command
+from tiltrov_ros.nodes.recorder_config import recorder_command
 
 FLUSHED = re.compile(r'\[bag_recorder\.stats\]: flushed (\d+) (\{.*\})')
 TOPICS = ('odom', 'joint_states')

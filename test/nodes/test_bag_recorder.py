@@ -39,7 +39,8 @@ from std_msgs.msg import String
 from tiltrov_ros.bag.bagfile import RUN_INFO_KEY
 from tiltrov_ros.core.errors import ParameterError
 from tiltrov_ros.core.timebase import cdr_stamp_ns
-from tiltrov_ros.nodes.bag_recorder import BagRecorder, recorder_command
+from tiltrov_ros.nodes.bag_recorder import BagRecorder
+from tiltrov_ros.nodes.recorder_config import recorder_command
 from tiltrov_ros.paths import config_file
 
 

@@ -30,10 +30,11 @@ from tiltrov_ros.core.params import ROBOT, STACK
 from tiltrov_ros.core.paramtable import ParamTable
 from tiltrov_ros.core.validation import FAILED_THRUSTERS
 
-from .bag_recorder import RECORDER_PARAMS
-from .base import RECORDER_HOLD, STAMP_BOUNDS
+from .base import RECORDER_HOLD
+from .guard import STAMP_BOUNDS
 from .parameters import robot_defaults
 from .plant_config import PLANT_PARAMS
+from .recorder_config import RECORDER_PARAMS
 from .reference_publisher import REFERENCE_PARAMS
 from .thrust_allocator import ALLOCATOR_PARAMS
 from .wrench_controller import CONTROLLER_PARAMS

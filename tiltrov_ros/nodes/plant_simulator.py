@@ -80,7 +80,7 @@ from tiltrov_ros.core.validation import (
     failed_thruster_indices,
 )
 
-from .base import OK, RECORDER_WAIT, THROTTLE, WARN, TiltrovNode, guarded, input_callback
+from .base import OK, RECORDER_WAIT, WARN, TiltrovNode
 from .conversions import (
     fill_joint_state,
     fill_odometry,
@@ -90,6 +90,7 @@ from .conversions import (
     set_stamp,
 )
 from .executors import main_loop
+from .guard import THROTTLE, guarded, input_callback
 from .markers import RobotMarkers
 from .parameters import Overrides
 from .plant_config import declare_parameters

@@ -41,9 +41,10 @@ from tiltrov_ros.core.scenarios import ReferenceProfile, load_scenario
 from tiltrov_ros.core.timebase import format_ns, seconds, to_ns
 from tiltrov_ros.core.validation import checked_stamp_ns
 
-from .base import OK, THROTTLE, WARN, TiltrovNode, guarded, input_callback
+from .base import OK, WARN, TiltrovNode
 from .conversions import fill_pose, fill_twist, stamp_ns
 from .executors import main_loop
+from .guard import THROTTLE, guarded, input_callback
 from .parameters import Overrides, check, declare, declare_robot
 from .qos import CLOCK_READER_QOS, PUBLISHER_QOS
 

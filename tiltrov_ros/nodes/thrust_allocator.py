@@ -5,22 +5,9 @@ answer), ``tilt_cmd`` and ``thrust_cmd``, all stamped with the wrench's stamp
 (in that order: the plant advances on the last two). ``previous`` is the last
 answer, so the tilts move least and at most ``max_tilt_step`` per call.
 
-The switching baseline fixes the tilts itself: its ``tilt_request`` (same
-stamp as its ``wrench_cmd``) makes the allocator hold the tilts there and
-solve for the thrusts (``allocate_fixed``). Parameter ``tilt_request``:
-
-* ``required``: every wrench waits for the tilt request with its stamp (they
-  travel on two topics, so either may come first); after ``input_timeout``
-  wall seconds the latest request received is used (counted on /diagnostics).
-  The wait is measured from the oldest wrench not answered: a newer wrench
-  replaces the waiting one (realtime) but does not restart the wait;
-* ``ignored``: free allocation, the topic is not subscribed;
-* ``auto`` (default): free allocation until a tilt request carries the stamp
-  of a wrench (the switching controller's do); from then on ``required``,
-  until a wrench waits ``input_timeout`` in vain, which returns to free
-  allocation. A request that matches no wrench (a stray publisher, another
-  run's replay) changes nothing; /diagnostics counts the requests received
-  and matched and names the topic's publishers.
+The switching baseline fixes the tilts itself through ``tilt_request``
+(parameter ``tilt_request``: ``auto``, ``required``, ``ignored``; how requests
+pair with wrenches: nodes/tilt_request.py).
 
 The launcher sets ``required`` for the switching controller and ``ignored``
 otherwise. A repeated wrench stamp re-publishes the cached answer without
@@ -33,7 +20,7 @@ from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 import math
 import sys
 from typing import Any
@@ -79,7 +66,7 @@ from tiltrov_ros.core.validation import (
     limit_command,
 )
 
-from .base import OK, THROTTLE, WARN, TiltrovNode, guarded, input_callback
+from .base import OK, WARN, TiltrovNode
 from .conversions import (
     FloatArray,
     fill_joint_state,
@@ -91,16 +78,16 @@ from .conversions import (
     wrench_array,
 )
 from .executors import main_loop
+from .guard import THROTTLE, guarded, input_callback
 from .parameters import Overrides, check, declare, declare_failed_thrusters, declare_robot
 from .qos import PUBLISHER_QOS, RELIABLE_QOS
+from .tilt_request import TILT_REQUEST_MODES, TiltRequests, keep_bounded
 from .watchdog import InputWatchdog
 
-TILT_REQUEST_MODES = ('auto', 'required', 'ignored')
 #: Where an allocation starts from: the last commanded tilts, or the measured ones.
 TILT_SOURCES = ('commanded', 'measured')
 #: s (wall): how often a wrench waiting for its tilt request is looked at.
 WATCHDOG_PERIOD = 0.1
-BUFFER = 200
 
 #: The node's own parameters (besides the allocator's, failed_thrusters, the stamp
 #: bounds and the robot).
@@ -133,14 +120,7 @@ def thruster_names(indices: Sequence[int]) -> str:
     return ', '.join(THRUSTERS[i] for i in indices) or 'none'
 
 
-@dataclass
-class _Waiting:
-    ns: int
-    wrench: FloatArray
-    since: int      # steady ns
-
-
-class ThrustAllocatorNode(TiltrovNode):
+class ThrustAllocatorNode(TiltRequests, TiltrovNode):
     """The thrust allocator (see the module docstring)."""
 
     def __init__(self, *, node_name: str = ALLOCATOR, namespace: str | None = None,
@@ -180,13 +160,7 @@ class ThrustAllocatorNode(TiltrovNode):
         self.previous: AllocationResult | None = None
         self._last_ns = -1
         self._last_msgs: tuple[WrenchStamped, JointState, JointState] | None = None
-        self._requests: dict[int, tuple[float, float]] = {}
-        self._latest_request: tuple[float, float] | None = None
-        #: auto mode: tilt requests have been carrying the wrenches' stamps.
-        self._paired = self.tilt_request_mode == 'required'
-        self.requests_received = 0
-        self.requests_matched = 0
-        self._waiting: _Waiting | None = None
+        self.init_tilt_requests()
         self.ticks = 0
         self.feasible = 0
         self.infeasible = 0
@@ -194,8 +168,6 @@ class ThrustAllocatorNode(TiltrovNode):
         self.methods: Counter[str] = Counter()
         self.max_error = 0.0
         self.republished = 0
-        self.stale_requests = 0
-        self.dropped = 0
         self.out_of_limits = 0
         self.safe_answers = 0
         self.clipped = 0
@@ -302,17 +274,6 @@ class ThrustAllocatorNode(TiltrovNode):
 
     # -- inputs ----------------------------------------------------------------------
 
-    def _needs_request(self) -> bool:
-        return self.tilt_request_mode != 'ignored' and self._paired
-
-    def _matched(self) -> None:
-        """A tilt request carried a wrench's stamp."""
-        self.requests_matched += 1
-        if not self._paired:
-            self._paired = True
-            self.get_logger().info('tilt_request carries the wrench_cmd stamps: tilts fixed '
-                                   'by the request from now on')
-
     @input_callback(WRENCH_CMD)
     def _on_wrench(self, msg: WrenchStamped) -> None:
         ns = self.check_header(msg.header, FRAME_BODY)
@@ -340,31 +301,9 @@ class ThrustAllocatorNode(TiltrovNode):
             self._matched()
             self._allocate(ns, wrench, request)
         elif self._needs_request():
-            since = self.steady_ns()
-            if self._waiting is not None:
-                self.dropped += 1     # a newer wrench came first (realtime)
-                since = self._waiting.since     # the wait goes on: it does not restart
-            self._waiting = _Waiting(ns, wrench, since)
+            self._wait(ns, wrench)
         else:
             self._allocate(ns, wrench, None)
-
-    @input_callback(TILT_REQUEST)
-    def _on_tilt_request(self, msg: JointState) -> None:
-        ns = self.check_header(msg.header, None)
-        values = joint_state_values(msg, TILTS, 'position')
-        request = (values[0], values[1])
-        self.requests_received += 1
-        self._requests[ns] = request
-        self._latest_request = request
-        if ns == self._last_ns:     # it came after its wrench was answered (free)
-            self._matched()
-        if len(self._requests) > BUFFER:
-            for stamp in sorted(self._requests)[:len(self._requests) - BUFFER]:
-                del self._requests[stamp]
-        waiting = self._waiting
-        if waiting is not None and waiting.ns == ns:
-            self._matched()
-            self._allocate(ns, waiting.wrench, request)
 
     @input_callback(JOINT_STATES)
     def _on_joint_states(self, msg: JointState) -> None:
@@ -372,11 +311,8 @@ class ThrustAllocatorNode(TiltrovNode):
         message, e.g. the thrusters, are allowed and ignored)."""
         ns = self.check_header(msg.header, None)
         front, rear = joint_state_values(msg, TILTS, 'position', allowed=list(msg.name))
-        self._measured[ns] = (front, rear)
+        keep_bounded(self._measured, ns, (front, rear))
         self._latest_measured = (ns, (front, rear))
-        if len(self._measured) > BUFFER:
-            for stamp in sorted(self._measured)[:len(self._measured) - BUFFER]:
-                del self._measured[stamp]
 
     def _start(self, ns: int) -> AllocationResult | None:
         """What the allocation of the wrench stamped ``ns`` starts from: the last answer,
@@ -391,29 +327,6 @@ class ThrustAllocatorNode(TiltrovNode):
                 return self.previous
             tilts = latest[1]
         return from_tilts(self.previous, tilts)
-
-    @guarded
-    def _watchdog(self) -> None:
-        waiting = self._waiting
-        if waiting is None:
-            return
-        waited = seconds(self.steady_ns() - waiting.since)
-        if waited < self.input_timeout:
-            return
-        self.stale_requests += 1
-        if self.tilt_request_mode == 'auto':
-            self._paired = False
-            self.get_logger().warning(
-                f'no tilt_request stamped {format_ns(waiting.ns)} after {waited:.2f} s: '
-                'free allocation until a request carries a wrench stamp again',
-                throttle_duration_sec=THROTTLE)
-            self._allocate(waiting.ns, waiting.wrench, None)
-            return
-        self.get_logger().warning(
-            f'no tilt_request stamped {format_ns(waiting.ns)} after {waited:.2f} s: using '
-            f'{"the latest" if self._latest_request else "none (free allocation)"}',
-            throttle_duration_sec=THROTTLE)
-        self._allocate(waiting.ns, waiting.wrench, self._latest_request)
 
     # -- allocation ------------------------------------------------------------------
 
@@ -558,29 +471,6 @@ class ThrustAllocatorNode(TiltrovNode):
             stamp, seen[0] if seen else None, to_ns(self.control_period))))
 
     # -- diagnostics -----------------------------------------------------------------
-
-    def _tilt_request_status(self) -> tuple[int, str, dict[str, Any]]:
-        """What the tilt requests do: paired with the wrenches or not, who sends them,
-        wrenches that waited in vain or were replaced while waiting."""
-        if self.tilt_request_mode == 'ignored':
-            return OK, '', {}
-        infos = self.get_publishers_info_by_topic(self.resolve_topic_name(TILT_REQUEST))
-        senders = sorted({f'{i.node_namespace.rstrip("/")}/{i.node_name}' for i in infos})
-        level, text = OK, ''
-        unmatched = self.requests_received - self.requests_matched
-        if self.dropped or (self.stale_requests and self._paired):
-            level = WARN
-            text = (f'; wrenches waiting for tilt_request: {self.stale_requests} timed out, '
-                    f'{self.dropped} replaced by newer ones')
-        elif self.requests_received and not self._paired:
-            level = WARN
-            text = (f'; {unmatched} tilt_request(s) from {", ".join(senders) or "(gone)"} '
-                    'carry no wrench_cmd stamp: ignored (free allocation)')
-        return level, text, {
-            'tilt_request_pairing': 'paired' if self._paired else 'free',
-            'tilt_requests_received': self.requests_received,
-            'tilt_requests_matched': self.requests_matched,
-            'tilt_request_publishers': senders}
 
     def diagnostic_status(self) -> tuple[int, str, dict[str, Any]]:
         level = OK

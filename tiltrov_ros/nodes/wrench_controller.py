@@ -75,7 +75,7 @@ from tiltrov_ros.core.validation import (
     check_quaternion,
 )
 
-from .base import OK, THROTTLE, WARN, TiltrovNode, guarded, input_callback
+from .base import OK, WARN, TiltrovNode
 from .conversions import (
     FloatArray,
     fill_joint_state,
@@ -88,6 +88,7 @@ from .conversions import (
     twist_array,
 )
 from .executors import main_loop
+from .guard import THROTTLE, guarded, input_callback
 from .parameters import Overrides, check, declare, declare_robot
 from .qos import PUBLISHER_QOS, RELIABLE_QOS, reader_qos
 from .watchdog import InputWatchdog
