@@ -31,7 +31,7 @@ The controller and allocator are anything with the methods of
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 import math
 from pathlib import Path
 from typing import Any, Protocol
@@ -350,9 +350,7 @@ def stack_config(scenario: str | Path | Scenario, controller: str | None = None,
         ctrl = ctrl.with_kind(controller)
     alloc = load_allocator_config(allocator_file)
     if allocator_mode is not None:
-        alloc = AllocatorConfig.from_mapping({'mode': allocator_mode,
-                                              'max_tilt_step': alloc.max_tilt_step,
-                                              'weights': list(alloc.weights)})
+        alloc = AllocatorConfig.from_mapping({**asdict(alloc), 'mode': allocator_mode})
     return StackConfig(scn, robot, ctrl, alloc, load_control_period(robot_file), step_size)
 
 

@@ -269,7 +269,7 @@ class ThrustAllocatorNode(TiltRequests, TiltrovNode):
         working = [i for i in range(4) if i not in failed]
         self.get_logger().warning(
             f'{why}: failed thruster(s): {thruster_names(failed)}; allocating with '
-            f'{thruster_names(working)} (weights {list(self.allocator_config.weights)}: '
+            f'{thruster_names(working)} (weights {[float(w) for w in self.allocator.weights]}: '
             'depth and attitude first)')
 
     # -- inputs ----------------------------------------------------------------------

@@ -6,6 +6,7 @@ imported from here; the modules hold one concern each.
 
 from tiltrov_ros.core.allocation.allocator import (
     DEFAULT_WEIGHTS,
+    FAILED_WEIGHTS,
     Mode,
     ThrustAllocator,
     allocate_sequence,
@@ -30,6 +31,7 @@ __all__ = [
     'ALLOCATION',
     'ALLOCATOR_YAML',
     'DEFAULT_WEIGHTS',
+    'FAILED_WEIGHTS',
     'FEASIBILITY_RTOL',
     'SHORTFALL_FRACTION',
     'AllocationResult',

@@ -73,8 +73,12 @@ from tiltrov_ros.core.thrust_map import thrust_wrench
 Mode = Literal['paper', 'robust']
 
 #: Default per-DOF weights (X, Y, Z, K, M, N) of the wrench error in robust mode:
-#: depth and attitude first.
-DEFAULT_WEIGHTS = (1.0, 1.0, 10.0, 10.0, 10.0, 1.0)
+#: depth and attitude (yaw included) first.
+DEFAULT_WEIGHTS = (1.0, 1.0, 10.0, 10.0, 10.0, 10.0)
+#: The default while a thruster has failed: three thrusters cannot hold every DOF,
+#: and yaw gives way to depth, roll and pitch (weighing yaw 10 there cost 0.32 m of
+#: depth in the thruster_failure scenario).
+FAILED_WEIGHTS = (1.0, 1.0, 10.0, 10.0, 10.0, 1.0)
 #: Robust fallback: a tilt motion of 1 rad weighs like this fraction of
 #: max(|tau|, max_thrust) of weighted wrench error, so the servos do not chase
 #: differences that are tiny compared with the wrench.
@@ -96,7 +100,8 @@ class ThrustAllocator:
         than pi reaches some thrust lines from two servo angles
     max_tilt_step : how far each tilt may move from ``previous`` in one call [rad]
     mode : ``'robust'`` (default) or ``'paper'``
-    weights : per-DOF weights (X, Y, Z, K, M, N) of the wrench error
+    weights : per-DOF weights (X, Y, Z, K, M, N) of the wrench error; default
+        :data:`DEFAULT_WEIGHTS`, :data:`FAILED_WEIGHTS` with ``failed_thrusters``
     failed_thrusters : indices 0..3 of thrusters that produce no thrust
     motion_penalty : robust fallback: weighted wrench error, as a fraction of
         max(|tau|, max_thrust), that 1 rad of tilt motion is worth
@@ -108,7 +113,7 @@ class ThrustAllocator:
     def __init__(self, length: float, width: float, max_thrust: float = 40.0,
                  tilt_limits: tuple[float, float] = (-HALF_PI, HALF_PI),
                  max_tilt_step: float = math.inf, mode: Mode = 'robust',
-                 weights: Sequence[float] = DEFAULT_WEIGHTS,
+                 weights: Sequence[float] | None = None,
                  failed_thrusters: Collection[int] = (),
                  motion_penalty: float = DEFAULT_MOTION_PENALTY,
                  planning: bool = True, horizon: int | None = None) -> None:
@@ -126,6 +131,8 @@ class ThrustAllocator:
             raise AllocationError(f'max_tilt_step must be > 0 rad, got {max_tilt_step}')
         if mode not in ('paper', 'robust'):
             raise AllocationError(f"mode must be 'paper' or 'robust', got {mode!r}")
+        if weights is None:
+            weights = FAILED_WEIGHTS if len(failed_thrusters) else DEFAULT_WEIGHTS
         w = np.array(weights, dtype=float)
         if w.shape != (6,) or not np.all(np.isfinite(w)) or np.any(w <= 0):
             raise AllocationError(f'weights must be 6 finite numbers > 0, got {weights}')

@@ -7,7 +7,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from tiltrov_ros.core.allocation.allocator import DEFAULT_WEIGHTS, Mode, ThrustAllocator
+from tiltrov_ros.core.allocation.allocator import (
+    DEFAULT_WEIGHTS,
+    FAILED_WEIGHTS,
+    Mode,
+    ThrustAllocator,
+)
 from tiltrov_ros.core.errors import ParameterError
 from tiltrov_ros.core.names import ALLOCATOR_MODES
 from tiltrov_ros.core.params import RobotParams
@@ -28,6 +33,9 @@ ALLOCATION = ParamTable('allocation', [
           high=1e6),
     Param('weights', 'floats', SHIPPED, 'robust mode: weights of the wrench error', 'per '
           'component X Y Z K M N', size=6, low=0.0, low_open=True),
+    Param('weights_failed', 'floats', SHIPPED, 'robust mode: weights of the wrench error '
+          'while a thruster has failed (three cannot hold every DOF: the small weights give '
+          'way)', 'per component X Y Z K M N', size=6, low=0.0, low_open=True),
 ])
 
 
@@ -39,11 +47,13 @@ class AllocatorConfig:
     max_tilt_step : rad per control period; <= 0 means the servo's reach,
         ``tilt_rate_limit * control_period``
     weights : per-DOF weights (X, Y, Z, K, M, N) of the wrench error
+    weights_failed : the weights while a thruster has failed
     """
 
     mode: Mode = 'robust'
     max_tilt_step: float = -1.0
     weights: tuple[float, ...] = DEFAULT_WEIGHTS
+    weights_failed: tuple[float, ...] = FAILED_WEIGHTS
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any], *,
@@ -53,8 +63,10 @@ class AllocatorConfig:
         # service. Keys of other tables (the node's) are ignored.
         checked = ALLOCATION.complete(values, source=source, unknown=True,
                                       defaults={'mode': 'robust', 'max_tilt_step': -1.0,
-                                                'weights': DEFAULT_WEIGHTS})
-        return cls(checked['mode'], checked['max_tilt_step'], tuple(checked['weights']))
+                                                'weights': DEFAULT_WEIGHTS,
+                                                'weights_failed': FAILED_WEIGHTS})
+        return cls(checked['mode'], checked['max_tilt_step'], tuple(checked['weights']),
+                   tuple(checked['weights_failed']))
 
     def tilt_step(self, robot: RobotParams, control_period: float) -> float:
         """max_tilt_step in rad, ``auto`` (<= 0) resolved from the servo rate."""
@@ -64,11 +76,13 @@ class AllocatorConfig:
 
     def build(self, robot: RobotParams, control_period: float,
               failed_thrusters: Collection[int] = ()) -> ThrustAllocator:
-        """The allocator for ``robot`` (geometry, thrust limit, tilt range and reach)."""
+        """The allocator for ``robot`` (geometry, thrust limit, tilt range and reach),
+        with ``weights_failed`` when ``failed_thrusters`` is not empty."""
         return ThrustAllocator(robot.length, robot.width, robot.max_thrust,
                                (robot.tilt_min, robot.tilt_max),
                                self.tilt_step(robot, control_period), self.mode,
-                               self.weights, failed_thrusters)
+                               self.weights_failed if failed_thrusters else self.weights,
+                               failed_thrusters)
 
 
 def load_allocator_config(path: str | Path | None = None) -> AllocatorConfig:
