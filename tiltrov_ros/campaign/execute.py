@@ -77,14 +77,25 @@ def dask_client(scheduler: str | None = None, workers: int | None = None) -> Ite
                                    scheduler_kwargs={'dashboard_address': '127.0.0.1:0'},
                                    silence_logs=logging.ERROR)
         client = Client(cluster)
+    # After Ctrl-C, distributed's own callbacks on the client's event loop can fail
+    # (a NameError inside distributed.utils.cancel, seen once in about twenty
+    # interrupted campaigns), and tornado logs each with its traceback: nothing a user
+    # can act on, so tornado's callback log is quiet while the client runs. Runs that
+    # fail come back as results (the table's status and error columns).
+    tornado_log = logging.getLogger('tornado.application')
+    level = tornado_log.level
+    tornado_log.setLevel(logging.CRITICAL)
     try:
         if scheduler:
             _check_workers(client, scheduler)
         yield client
     finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
+        try:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+        finally:
+            tornado_log.setLevel(level)
 
 
 @contextmanager
