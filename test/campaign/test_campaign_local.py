@@ -16,11 +16,12 @@ import yaml
 
 from tiltrov_ros.campaign.execute import PINNED_THREADS, dask_client
 from tiltrov_ros.campaign.plan import Plan
-from tiltrov_ros.campaign.table import flatten, metric_columns, row_metrics
+from tiltrov_ros.campaign.table import metric_columns, row_metrics
 from tiltrov_ros.campaign.worker import run_one, worker_environment
 from tiltrov_ros.core.campaign import draw_sample, draw_samples, load_campaign
 from tiltrov_ros.core.metrics import metric_differences
 from tiltrov_ros.core.names import DOF_NAMES
+from tiltrov_ros.core.yamlfile import flatten
 
 pytestmark = pytest.mark.slow
 

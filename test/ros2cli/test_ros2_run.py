@@ -17,8 +17,8 @@ from ros2_cli import Ros2, ctrl_c, doc_commands, overrides, wait_nodes
 import yaml
 
 from tiltrov_ros.core.names import STACK_TOPICS
+from tiltrov_ros.core.yamlfile import flatten
 from tiltrov_ros.nodes.parameter_docs import NODES as PARAMETERS
-from tiltrov_ros.nodes.parameters import _flatten as flatten
 
 REPO = Path(__file__).resolve().parents[2]
 NODES = ('plant_simulator', 'wrench_controller', 'thrust_allocator', 'reference_publisher',

@@ -29,6 +29,7 @@ from typing import Any, TextIO
 
 from tiltrov_ros.core.campaign import metrics_template
 from tiltrov_ros.core.errors import CampaignError
+from tiltrov_ros.core.yamlfile import flatten
 
 TABLE = 'runs.csv'
 RUN_COLUMNS = ('run_id', 'sample', 'configuration', 'controller', 'allocator', 'gains',
@@ -36,17 +37,6 @@ RUN_COLUMNS = ('run_id', 'sample', 'configuration', 'controller', 'allocator', '
 #: Columns that depend on where and when a run ran, not on what it computed.
 TIMING_COLUMNS = ('seconds', 'worker')
 PARAM = 'param.'
-
-
-def flatten(values: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:
-    """Nested mappings as one level, keys joined by dots."""
-    out: dict[str, Any] = {}
-    for key, value in values.items():
-        if isinstance(value, Mapping):
-            out.update(flatten(value, f'{prefix}{key}.'))
-        else:
-            out[f'{prefix}{key}'] = value
-    return out
 
 
 def metric_columns() -> list[str]:

@@ -35,10 +35,11 @@ import yaml
 from tiltrov_ros.analysis.runs import InputError, one_line
 from tiltrov_ros.campaign.plan import Plan, RunTask
 from tiltrov_ros.campaign.summary import comparison_rows, summarize, text_table, write_summary
-from tiltrov_ros.campaign.table import PARAM, TABLE, RunTable, columns, flatten, read_table
+from tiltrov_ros.campaign.table import PARAM, TABLE, RunTable, columns, read_table
 from tiltrov_ros.campaign.worker import RunResult
 from tiltrov_ros.core.campaign import CampaignSpec, Sample, draw_samples, load_campaign
 from tiltrov_ros.core.errors import TiltrovError
+from tiltrov_ros.core.yamlfile import flatten
 from tiltrov_ros.progress import ProgressBar
 
 from .output import print_written, report_errors

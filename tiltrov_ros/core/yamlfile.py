@@ -1,7 +1,9 @@
-"""Reading a YAML file the user gave or edited: one-line errors naming the file."""
+"""Reading a YAML file the user gave or edited (one-line errors naming the file), and
+flattening a nested document into dotted keys."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -27,3 +29,15 @@ def read_yaml(path: str | Path) -> Any:
         problem = getattr(exc, 'problem', None) or str(exc).splitlines()[0]
         raise UnreadableFileError(f'cannot read {path}: not valid YAML: {problem}{where}') \
             from None
+
+
+def flatten(document: Mapping[Any, Any], prefix: str = '') -> dict[str, Any]:
+    """Nested mappings as one level, keys joined by dots:
+    ``{robot: {length: 0.6}}`` -> ``{'robot.length': 0.6}``."""
+    out: dict[str, Any] = {}
+    for key, value in document.items():
+        if isinstance(value, Mapping):
+            out.update(flatten(value, f'{prefix}{key}.'))
+        else:
+            out[f'{prefix}{key}'] = value
+    return out

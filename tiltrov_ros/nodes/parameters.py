@@ -39,6 +39,7 @@ from tiltrov_ros.core.params import (
     load_robot_params,
 )
 from tiltrov_ros.core.paramtable import Param, ParamTable
+from tiltrov_ros.core.yamlfile import flatten
 
 #: ROS type of each kind of table line (arrays are typed by their elements, also empty).
 _ROS_TYPES = {'float': Parameter.Type.DOUBLE, 'int': Parameter.Type.INTEGER,
@@ -184,17 +185,6 @@ def section_matches(key: str, node: str) -> bool:
     return re.fullmatch(pattern, node) is not None
 
 
-def _flatten(doc: Mapping[Any, Any], prefix: str = '') -> dict[str, Any]:
-    """``{robot: {length: 0.6}}`` -> ``{'robot.length': 0.6}``."""
-    out: dict[str, Any] = {}
-    for key, value in doc.items():
-        if isinstance(value, Mapping):
-            out.update(_flatten(value, f'{prefix}{key}.'))
-        else:
-            out[f'{prefix}{key}'] = value
-    return out
-
-
 def file_sections(path: str) -> dict[str, dict[str, Any]]:
     """Section key -> its ``ros__parameters`` (flattened names) of a parameter file;
     empty when the file cannot be read (rcl reports that at start-up)."""
@@ -208,7 +198,7 @@ def file_sections(path: str) -> dict[str, dict[str, Any]]:
     out: dict[str, dict[str, Any]] = {}
     for key, section in doc.items():
         params = section.get('ros__parameters') if isinstance(section, Mapping) else None
-        out[str(key)] = _flatten(params) if isinstance(params, Mapping) else {}
+        out[str(key)] = flatten(params) if isinstance(params, Mapping) else {}
     return out
 
 
