@@ -4,6 +4,7 @@ replay or a stray tool would (docs/reliability.md, "Attacks")."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 import math
 import os
 from pathlib import Path
@@ -138,6 +139,33 @@ def _assert_thrust_kept(watch: Probe, start: int) -> None:
     assert before and during and min(before) > 1.0, (before[-3:], len(during))
     assert statistics.median(during) > 0.5 * min(before), (
         min(before), statistics.median(during))
+
+
+def _recorder_stopped(ros: Any, tmp_path: Path, bag: Path, args: tuple[str, ...],
+                      stop_at: float, resume_when: Callable[[Probe, dict[str, int]], bool],
+                      *, timeout: float, behind: float = 0.0) -> tuple[int, str]:
+    """``tiltrov launch ARGS --record BAG`` with the recorder stopped (SIGSTOP) once
+    /clock reaches ``stop_at`` s and resumed (SIGCONT) ``behind`` s after
+    ``resume_when(clock probe, pids)`` holds: the launch's exit code and output."""
+    # The probe first: a fast (lockstep) run can end before a reader created after the
+    # launch is matched (a loaded machine), and the probe would wait for ever.
+    watch = Probe(ros.node('clock_probe'), ['/clock'])
+    launch = LaunchProcess(tmp_path, *args, '--record', str(bag))
+    try:
+        pids = launch.wait_running()
+        assert ros.spin_until(lambda: bool(watch['/clock'])
+                              and _latest_clock(watch) >= stop_at * NS_PER_S, timeout=timeout)
+        os.kill(pids['bag_recorder'], signal.SIGSTOP)
+        try:
+            assert ros.spin_until(lambda: resume_when(watch, pids), timeout=timeout), \
+                launch.output
+            ros.spin_for(behind)
+        finally:
+            os.kill(pids['bag_recorder'], signal.SIGCONT)
+        code = launch.finish(timeout=120)
+    finally:
+        launch.cleanup()
+    return code, launch.output
 
 
 def _nan_odom(ns: int) -> Odometry:
@@ -527,24 +555,12 @@ def test_a_recorder_that_falls_behind_fails_the_launch_and_bag_info_says_what_wa
     code 0; an unrelated flood of 147 000 msg/s made the recorder lose 1 874 odom and
     the launch exited 0 too)."""
     bag = tmp_path / 'bag'
-    launch = LaunchProcess(tmp_path, '--realtime', '--real-time-factor', '5', '--duration',
-                           '40', '--record', str(bag))
-    try:
-        pids = launch.wait_running()
-        watch = Probe(ros.node('clock_probe'), ['/clock'])
-        assert ros.spin_until(lambda: bool(watch['/clock'])
-                              and _latest_clock(watch) >= 5 * NS_PER_S, timeout=60.0)
-        os.kill(pids['bag_recorder'], signal.SIGSTOP)
-        try:
-            assert ros.spin_until(lambda: _latest_clock(watch) >= 25 * NS_PER_S, timeout=60.0)
-        finally:
-            os.kill(pids['bag_recorder'], signal.SIGCONT)
-        code = launch.finish(timeout=120)
-    finally:
-        launch.cleanup()
-    assert code == 1, launch.output
-    assert 'tiltrov launch: failed: the recording lost data' in launch.output
-    lines = [line.strip() for line in launch.output.splitlines()]
+    code, output = _recorder_stopped(
+        ros, tmp_path, bag, ('--realtime', '--real-time-factor', '5', '--duration', '40'),
+        5, lambda watch, _: _latest_clock(watch) >= 25 * NS_PER_S, timeout=60.0)
+    assert code == 1, output
+    assert 'tiltrov launch: failed: the recording lost data' in output
+    lines = [line.strip() for line in output.splitlines()]
     # Per topic when the recorder caught up with the nodes' final counts before they
     # stopped; else per node, whose final report (with its counts) is itself lost.
     # Which one depends on how far behind the recorder still is at the end.
@@ -553,15 +569,15 @@ def test_a_recorder_that_falls_behind_fails_the_launch_and_bag_info_says_what_wa
             for line in lines)
         and any(line.startswith(f'{topic}: DDS reported') for line in lines)
         for topic in ('/odom', '/joint_states', '/clock'))
-    per_node = all(f'/{node}: its final report is not in the bag' in launch.output
+    per_node = all(f'/{node}: its final report is not in the bag' in output
                    for node in STACK)
-    assert per_topic or per_node, launch.output
+    assert per_topic or per_node, output
     info = _bag_info(bag)
     assert 'lost:' in info, info
     assert ('/odom: DDS reported' in info if per_topic
             else all(f'/{node}: its final report is not in the bag' in info
                      for node in STACK)), info
-    assert 'Traceback' not in launch.output
+    assert 'Traceback' not in output
 
 
 @pytest.mark.slow
@@ -574,25 +590,11 @@ def test_a_recorder_behind_at_the_end_of_a_run_loses_nothing(ros: Any, tmp_path:
     what the recorder had not taken went with them: the last 8 s of every topic lost,
     exit code 0)."""
     bag = tmp_path / 'bag'
-    # The probe first: a lockstep run of 30 s can end before a reader created after the
-    # launch is matched (a loaded machine), and the probe would wait for ever.
-    watch = Probe(ros.node('clock_probe'), ['/clock'])
-    launch = LaunchProcess(tmp_path, '--duration', '30', '--record', str(bag))
-    try:
-        pids = launch.wait_running()
-        assert ros.spin_until(lambda: bool(watch['/clock'])
-                              and _latest_clock(watch) >= 22 * NS_PER_S, timeout=120.0)
-        os.kill(pids['bag_recorder'], signal.SIGSTOP)
-        try:
-            assert ros.spin_until(lambda: _latest_clock(watch) == 30 * NS_PER_S,
-                                  timeout=120.0)
-            ros.spin_for(1.5)       # how far behind the recorder is: the attack's input
-        finally:
-            os.kill(pids['bag_recorder'], signal.SIGCONT)
-        code = launch.finish(timeout=120)
-    finally:
-        launch.cleanup()
-    assert code == 0, launch.output
+    code, output = _recorder_stopped(
+        ros, tmp_path, bag, ('--duration', '30'), 22,
+        lambda watch, _: _latest_clock(watch) == 30 * NS_PER_S, timeout=120.0,
+        behind=1.5)     # how far behind the recorder is: the attack's input
+    assert code == 0, output
     stamps = _stamps(bag)
     steps = set(range(0, 30_001, 10))
     ticks = set(range(0, 30_000, 50))
@@ -613,28 +615,14 @@ def test_a_recorder_still_behind_when_the_nodes_give_up_fails_the_launch(
     whose final report is missing, and ``tiltrov bag info`` says the same (before:
     exit code 0, the bag silently 8 s short)."""
     bag = tmp_path / 'bag'
-    # The probe first: a lockstep run of 30 s can end before a reader created after the
-    # launch is matched (a loaded machine), and the probe would wait for ever.
-    watch = Probe(ros.node('clock_probe'), ['/clock'])
-    launch = LaunchProcess(tmp_path, '--duration', '30', '--record', str(bag))
-    try:
-        pids = launch.wait_running()
-        assert ros.spin_until(lambda: bool(watch['/clock'])
-                              and _latest_clock(watch) >= 22 * NS_PER_S, timeout=120.0)
-        os.kill(pids['bag_recorder'], signal.SIGSTOP)
-        try:
-            assert ros.spin_until(lambda: not any(alive(pids[n]) for n in STACK),
-                                  timeout=120.0), launch.output
-        finally:
-            os.kill(pids['bag_recorder'], signal.SIGCONT)
-        code = launch.finish(timeout=120)
-    finally:
-        launch.cleanup()
-    assert code == 1, launch.output
+    code, output = _recorder_stopped(
+        ros, tmp_path, bag, ('--duration', '30'), 22,
+        lambda _, pids: not any(alive(pids[n]) for n in STACK), timeout=120.0)
+    assert code == 1, output
     info = _bag_info(bag)
     for node in STACK:
         line = f'/{node}: its final report is not in the bag'
-        assert line in launch.output and line in info, (node, launch.output, info)
+        assert line in output and line in info, (node, output, info)
 
 
 # --------------------------------------------------------------------------- smaller ones
