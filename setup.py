@@ -39,7 +39,9 @@ setup(
         ('share/' + package_name + '/config/campaigns', glob('config/campaigns/*.yaml')),
     ],
     python_requires='>=3.11',
-    install_requires=['setuptools', 'numpy>=1.26', 'scipy>=1.11', 'PyYAML>=6.0'],
+    # numba compiles the hot paths (tiltrov_ros/core/jit.py); without it the numpy
+    # reference runs (same answers, slower), with one warning.
+    install_requires=['setuptools', 'numpy>=1.26', 'scipy>=1.11', 'PyYAML>=6.0', 'numba>=0.60'],
     extras_require={
         # Bag tools and figures.
         'bags': ['mcap>=1.2', 'mcap-ros2-support>=0.5', 'rosbags>=0.10',

@@ -1,0 +1,204 @@
+"""Compiled kernels: which backend runs, where the compiled code is cached, compiling ahead.
+
+The hot paths of the core (allocation, the plant step, the control laws) exist
+twice: the numpy/Python *reference* (the readable implementation the tests
+trust) and *kernels* compiled by numba from plain-Python loops, pinned to the
+reference by tests. This module is the one place that decides which of the two
+runs and that manages numba:
+
+* :func:`backend` -- ``'numba'`` or ``'numpy'``, resolved once per process:
+  ``TILTROV_BACKEND=numpy`` forces the reference, ``numba`` requires the
+  kernels, ``auto`` (the default) takes numba when it imports and otherwise
+  the reference, with one warning on stderr.
+* :func:`kernel` -- the decorator of every kernel. With numba it returns a lazy
+  ``numba.njit(cache=True, nogil=True, error_model='numpy')`` dispatcher
+  (nothing compiles at import); without it the plain Python function.
+  ``signatures`` name the types a kernel is called with from Python: only
+  those are compiled ahead (kernels called only from other kernels need none).
+* :func:`warmup` -- compiles (or loads from the cache) every registered kernel
+  of the given groups for its signatures, then forbids further compilation
+  (a call with other types raises instead of compiling in the middle of a
+  control tick). Nodes call it in their constructor, before they subscribe;
+  ``tiltrov warmup`` and ``make install`` call it ahead of use.
+* The cache: numba writes it beside the source when the package directory is
+  writable (a checkout, a venv); in a read-only install (a colcon install
+  space under /opt, a system site-packages) it goes to
+  ``$XDG_CACHE_HOME/tiltrov_ros/numba`` (``~/.cache/...``), else to the
+  temporary directory. ``NUMBA_CACHE_DIR`` set by the user always wins.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+import os
+from pathlib import Path
+import sys
+import tempfile
+import time
+from typing import Any, TypeVar
+
+#: Environment variable choosing the backend: ``auto`` (default), ``numba`` or ``numpy``.
+BACKEND_ENV = 'TILTROV_BACKEND'
+BACKENDS = ('auto', 'numba', 'numpy')
+
+F = TypeVar('F', bound=Callable[..., Any])
+
+_PACKAGE_DIR = Path(__file__).resolve().parent.parent
+
+
+@dataclass
+class _State:
+    backend: str | None = None
+    reason: str = ''
+    cache_dir: str | None = None
+    kernels: list[Registered] = field(default_factory=list)
+    warm_seconds: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass
+class Registered:
+    """A kernel known to :func:`warmup`: its group, name, dispatcher and signatures."""
+
+    group: str
+    name: str
+    dispatcher: Any
+    signatures: tuple[str, ...]
+    sealed: bool = False
+
+
+_STATE = _State()
+
+
+def _writable(directory: Path) -> bool:
+    """True when numba could write its cache beside sources in ``directory``."""
+    cache = directory / '__pycache__'
+    target = cache if cache.is_dir() else directory
+    return os.access(target, os.W_OK | os.X_OK)
+
+
+def _user_cache_dir() -> str:
+    """A writable directory for the cache when the package directory is not."""
+    base = os.environ.get('XDG_CACHE_HOME') or os.path.join(os.path.expanduser('~'), '.cache')
+    for candidate in (os.path.join(base, 'tiltrov_ros', 'numba'),
+                      os.path.join(tempfile.gettempdir(), f'tiltrov_ros-numba-{os.getuid()}')):
+        try:
+            os.makedirs(candidate, exist_ok=True)
+        except OSError:
+            continue
+        if os.access(candidate, os.W_OK | os.X_OK):
+            return candidate
+    raise OSError('no writable directory for the compiled kernels\' cache')
+
+
+def _configure_cache() -> str | None:
+    """Point numba's cache somewhere writable before numba is imported."""
+    if os.environ.get('NUMBA_CACHE_DIR'):
+        return os.environ['NUMBA_CACHE_DIR']
+    if all(_writable(d) for d in (_PACKAGE_DIR / 'core',)):
+        return None                                  # numba's default: beside the source
+    directory = _user_cache_dir()
+    os.environ['NUMBA_CACHE_DIR'] = directory
+    if 'numba' in sys.modules:                       # imported before us: tell it directly
+        sys.modules['numba'].config.CACHE_DIR = directory
+    return directory
+
+
+def backend() -> str:
+    """``'numba'`` or ``'numpy'``: the implementation this process runs (resolved once)."""
+    if _STATE.backend is not None:
+        return _STATE.backend
+    wanted = os.environ.get(BACKEND_ENV, 'auto').strip().lower() or 'auto'
+    if wanted not in BACKENDS:
+        print(f'tiltrov_ros: {BACKEND_ENV}={wanted!r} is not one of {", ".join(BACKENDS)}: '
+              'using the numpy reference', file=sys.stderr)
+        _STATE.backend, _STATE.reason = 'numpy', f'{BACKEND_ENV}={wanted!r} not understood'
+        return _STATE.backend
+    if wanted == 'numpy':
+        _STATE.backend, _STATE.reason = 'numpy', f'{BACKEND_ENV}=numpy'
+        return _STATE.backend
+    try:
+        _STATE.cache_dir = _configure_cache()
+        import numba
+    except (ImportError, OSError) as exc:
+        if wanted == 'numba':
+            raise ImportError(f'{BACKEND_ENV}=numba but the compiled kernels cannot be '
+                              f'used: {exc}') from exc
+        print(f'tiltrov_ros: numba is not available ({exc}); running the numpy reference '
+              '(slower, same answers). Install numba for the compiled kernels.',
+              file=sys.stderr)
+        _STATE.backend, _STATE.reason = 'numpy', f'numba unavailable: {exc}'
+        return _STATE.backend
+    _STATE.backend, _STATE.reason = 'numba', f'numba {numba.__version__}'
+    return _STATE.backend
+
+
+def compiled() -> bool:
+    """True when the kernels run (the backend is numba)."""
+    return backend() == 'numba'
+
+
+def describe() -> dict[str, Any]:
+    """The backend, why, the cache directory and the warm-up times: for diagnostics and
+    a run's ``run_info``."""
+    name = backend()
+    cache = _STATE.cache_dir
+    if name == 'numba' and cache is None:
+        cache = str(_PACKAGE_DIR)
+    return {'backend': name, 'reason': _STATE.reason, 'cache_dir': cache,
+            'warmup_seconds': dict(_STATE.warm_seconds)}
+
+
+def kernel(*signatures: str, group: str = '') -> Callable[[F], F]:
+    """Decorate a kernel (see the module docstring).
+
+    ``signatures``: numba type strings of the calls made from Python (compiled
+    ahead by :func:`warmup`); ``group``: which warm-up set it belongs to
+    (``'allocation'``, ``'plant'``, ``'control'``); required with signatures.
+    """
+    if signatures and not group:
+        raise ValueError('a kernel called from Python needs a warm-up group')
+
+    def decorate(fn: F) -> F:
+        if not compiled():
+            return fn
+        import numba
+        dispatcher: Any = numba.njit(cache=True, nogil=True, error_model='numpy')(fn)
+        if signatures:
+            _STATE.kernels.append(Registered(group, f'{fn.__module__}.{fn.__qualname__}',
+                                             dispatcher, tuple(signatures)))
+        out: F = dispatcher
+        return out
+
+    return decorate
+
+
+def registered(groups: Iterable[str] | None = None) -> list[Registered]:
+    """The kernels registered so far (of ``groups``, or all)."""
+    wanted = None if groups is None else set(groups)
+    return [k for k in _STATE.kernels if wanted is None or k.group in wanted]
+
+
+def warmup(groups: Iterable[str] | None = None, *, seal: bool = True) -> float:
+    """Compile or load every registered kernel of ``groups`` (default: all) for its
+    signatures; returns the seconds it took (0 with the numpy reference).
+
+    The kernel modules must be imported first (the public modules import them).
+    ``seal``: afterwards a call with types not compiled raises instead of compiling.
+    """
+    if not compiled():
+        return 0.0
+    start = time.perf_counter()
+    chosen = registered(groups)
+    for k in chosen:
+        if k.sealed:
+            continue
+        for sig in k.signatures:
+            k.dispatcher.compile(sig)
+        if seal:
+            k.dispatcher.disable_compile()
+            k.sealed = True
+    elapsed = time.perf_counter() - start
+    key = ','.join(sorted({k.group for k in chosen})) or 'none'
+    _STATE.warm_seconds[key] = _STATE.warm_seconds.get(key, 0.0) + elapsed
+    return elapsed
