@@ -1,0 +1,81 @@
+"""The flat arrays the allocation kernels exchange: one index per field.
+
+numba passes float64 arrays to and between kernels at no cost, where objects
+would need boxing; these constants name their entries. Every kernel module
+imports them from here (one definition), and :mod:`..allocator` packs and
+unpacks with them.
+"""
+
+from __future__ import annotations
+
+# --------------------------------------------------------------------------- allocator config
+# cfg: float64[CFG_SIZE], built once per ThrustAllocator (pack_config in ..allocator).
+CFG_L = 0                 # l, thruster spacing along x [m]
+CFG_W = 1                 # d, thruster spacing along y [m]
+CFG_K = 2                 # (l + d) / (2 sqrt2), the yaw arm of eq. (4)
+CFG_FMAX = 3              # max_thrust [N]
+CFG_TILT_MIN = 4          # servo range [rad]
+CFG_TILT_MAX = 5
+CFG_STEP = 6              # max_tilt_step [rad] (inf: none)
+CFG_WEIGHTS = 7           # 6 entries: weights X Y Z K M N
+CFG_AVAILABLE = 13        # 4 entries: 1.0 working, 0.0 failed
+CFG_MODE = 17             # 0.0 paper, 1.0 robust
+CFG_PENALTY = 18          # motion_penalty
+CFG_PLANNING = 19         # 1.0: plan the servos' travel
+CFG_HORIZON = 20          # planning horizon (calls), an integer as float
+CFG_SIZE = 21
+
+MODE_PAPER = 0.0
+MODE_ROBUST = 1.0
+
+# --------------------------------------------------------------------------- the tilt problem
+# prob: float64[PROB_SIZE], a TiltProblem (reference: ..thrusts.TiltProblem), scaled units.
+PROB_SCALE = 0            # s = max(max |tau_i|, f_max)
+PROB_FMAX = 1             # f_max / s
+PROB_UPPER = 2            # 4 entries: per-thruster limit (0 for a failed one)
+PROB_S_COEF = 6           # 4 entries: (A1, A2, B1, B2) of the sums block
+PROB_D_COEF = 10          # 4 entries: the differences block
+PROB_S_TARGET = 14        # 4 entries: (u1, v1, u2, v2) of the sums block
+PROB_D_TARGET = 18        # 4 entries: the differences block
+PROB_TARGET_NORM2 = 22    # |W tau|^2 (scaled)
+PROB_ALL_AVAILABLE = 23   # 1.0 when no thruster has failed
+PROB_AVAILABLE = 24       # 4 entries: 1.0 working, 0.0 failed
+PROB_TAU = 28             # 6 entries: the scaled wrench
+PROB_SIZE = 34
+
+# --------------------------------------------------------------------------- one evaluation
+# rec: float64[REC_SIZE], an Evaluation (reference: ..local.Evaluation).
+REC_A = 0
+REC_B = 1
+REC_COST = 2
+REC_GRAD = 3              # 2 entries: dc/da, dc/db
+REC_HESS = 5              # 3 entries: c_aa, c_ab, c_bb
+REC_THRUSTS = 8           # 4 entries (scaled)
+REC_BOUNDS = 12           # 4 entries: -1, 0, +1 or 2 (failed), as floats
+REC_SIZE = 16
+
+# --------------------------------------------------------------------------- previous result
+# prev: float64[PREV_SIZE], what allocate() needs of ``previous`` (NaN tilts: none).
+PREV_TILTS = 0            # 2 entries: tilt_front, tilt_rear (NaN: no previous)
+PREV_TRANSIT = 2          # 1.0 when previous.method == 'transit'
+PREV_TARGET = 3           # 2 entries: previous.target (NaN: none)
+PREV_STUCK = 5            # previous.stuck
+PREV_SIZE = 6
+
+# --------------------------------------------------------------------------- one result
+# out: float64[OUT_SIZE], an AllocationResult (reference: ..results.AllocationResult).
+OUT_THRUSTS = 0           # 4 entries [N]
+OUT_TILTS = 4             # 2 entries [rad]
+OUT_ACHIEVED = 6          # 6 entries, eq. (4)
+OUT_FEASIBLE = 12         # 1.0 / 0.0
+OUT_METHOD = 13           # index into METHODS
+OUT_DISC = 14             # discriminant of (**) (NaN where it does not apply)
+OUT_ERROR = 15            # weighted error
+OUT_TARGET = 16           # 2 entries (NaN: none)
+OUT_STUCK = 18
+OUT_SIZE = 19
+
+#: AllocationResult.method by code (OUT_METHOD).
+METHODS = ('exact', 'family', 'zero', 'saturated', 'pseudo', 'optimized', 'fixed_tilt',
+           'transit', 'previous')
+METHOD_CODE = {name: float(i) for i, name in enumerate(METHODS)}
