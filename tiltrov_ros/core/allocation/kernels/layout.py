@@ -55,12 +55,13 @@ REC_BOUNDS = 12           # 4 entries: -1, 0, +1 or 2 (failed), as floats
 REC_SIZE = 16
 
 # --------------------------------------------------------------------------- previous result
-# prev: float64[PREV_SIZE], what allocate() needs of ``previous`` (NaN tilts: none).
-PREV_TILTS = 0            # 2 entries: tilt_front, tilt_rear (NaN: no previous)
-PREV_TRANSIT = 2          # 1.0 when previous.method == 'transit'
-PREV_TARGET = 3           # 2 entries: previous.target (NaN: none)
-PREV_STUCK = 5            # previous.stuck
-PREV_SIZE = 6
+# prev: float64[PREV_SIZE], what allocate() needs of ``previous``.
+PREV_EXISTS = 0           # 1.0 when a previous result was given (0.0: the rest is unused)
+PREV_TILTS = 1            # 2 entries: tilt_front, tilt_rear as given (non-finite: no tilts)
+PREV_TRANSIT = 3          # 1.0 when previous.method == 'transit'
+PREV_TARGET = 4           # 2 entries: previous.target (NaN: none)
+PREV_STUCK = 6            # previous.stuck
+PREV_SIZE = 7
 
 # --------------------------------------------------------------------------- one result
 # out: float64[OUT_SIZE], an AllocationResult (reference: ..results.AllocationResult).
