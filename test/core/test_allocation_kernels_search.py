@@ -150,3 +150,24 @@ def test_narrow_boxes_at_the_range_edges() -> None:
             ref = _record(Search(case.reference, box, p, 1e-3).run([p]))
             search.run(case.prob, box, p, True, 1e-3, False, False, p[None].copy(), 1, rec)
             assert_close(rec, ref, atol(case), f'case {i} prev={prev}')
+
+
+def test_a_start_repeated_is_refined_once() -> None:
+    """Starts on the grid's corners and repeated ones (exact solutions clipped to the
+    same corner) cost no refinement and change no answer, in both implementations."""
+    rng = np.random.default_rng(46)
+    rec_once, rec_twice = np.empty(lay.REC_SIZE), np.empty(lay.REC_SIZE)
+    for i, case in enumerate(CASES[:count(30, 6)]):
+        box, anchor, penalty, _, starts = _setup(i, 'reach', rng)
+        s = Search(case.reference, box, anchor, penalty)
+        once = s.run(list(starts[:2]))
+        evaluations = s.evaluations
+        twice = s.run([starts[1], *starts[:2], starts[1], starts[0] + 0.0])
+        assert twice == once
+        assert s.evaluations == 2 * evaluations
+        for rows, rec in ((starts[:2], rec_once),
+                          (np.vstack([starts[1], starts[:2], starts[1]]), rec_twice)):
+            search.run(case.prob, box, np.zeros(2) if anchor is None else anchor,
+                       anchor is not None, penalty, False, False, np.ascontiguousarray(rows),
+                       len(rows), rec)
+        np.testing.assert_array_equal(rec_twice, rec_once)

@@ -279,6 +279,17 @@ def _limits(box: FloatArray, periodic_a: bool, periodic_b: bool) -> FloatArray:
     return lim
 
 
+@jit.kernel()
+def _started(refined: FloatArray, n: int, a: float, b: float) -> bool:
+    """(a, b) is one of refined[:n], signs of zeros included."""
+    for i in range(n):
+        ra, rb = refined[i, 0], refined[i, 1]
+        if (ra == a and rb == b and math.copysign(1.0, ra) == math.copysign(1.0, a)
+                and math.copysign(1.0, rb) == math.copysign(1.0, b)):
+            return True
+    return False
+
+
 @jit.kernel('void(float64[::1], float64[:, ::1], float64[::1], boolean, float64, boolean, '
             'boolean, float64[:, ::1], int64, float64[::1])', group='allocation')
 def run(prob: FloatArray, box: FloatArray, anchor: FloatArray, has_anchor: bool, penalty: float,
@@ -296,6 +307,8 @@ def run(prob: FloatArray, box: FloatArray, anchor: FloatArray, has_anchor: bool,
     work, iwork = np.empty(WORK_SIZE), np.empty(IWORK_SIZE, dtype=np.int64)
     have = False
     nb = gb.shape[0]
+    refined = np.empty((n + n_starts, 2))          # where each refinement started
+    n_refined = 0
     for k in range(n + n_starts):
         if k < n:
             a, b = ga[cells[k] // nb], gb[cells[k] % nb]
@@ -303,6 +316,12 @@ def run(prob: FloatArray, box: FloatArray, anchor: FloatArray, has_anchor: bool,
             a, b = starts[k - n, 0], starts[k - n, 1]
             if not (math.isfinite(a) and math.isfinite(b)):
                 continue
+        # A start where one before started repeats its refinement: skipped (Search.run).
+        a, b = _py_min(_py_max(a, lim[0]), lim[1]), _py_min(_py_max(b, lim[2]), lim[3])
+        if _started(refined, n_refined, a, b):
+            continue
+        refined[n_refined, 0], refined[n_refined, 1] = a, b
+        n_refined += 1
         _refine(prob, lim, mu2, anchor_a, anchor_b, a, b, recs, hint, work, iwork)
         if not have or (_value(recs[_E], mu2, anchor_a, anchor_b)
                         < _value(recs[_BEST], mu2, anchor_a, anchor_b)):
