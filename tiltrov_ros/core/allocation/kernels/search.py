@@ -189,6 +189,14 @@ def _trust_step(haa: float, hab: float, hbb: float, ga: float, gb: float,
 
 
 @jit.kernel()
+def _copy(src: FloatArray, dst: FloatArray) -> None:
+    """dst[:REC_SIZE] = src[:REC_SIZE], as a loop (a slice assignment would compile
+    numba's shape-mismatch error message, seconds of compile time)."""
+    for i in range(REC_SIZE):
+        dst[i] = src[i]
+
+
+@jit.kernel()
 def _value(rec: FloatArray, mu2: float, anchor_a: float, anchor_b: float) -> float:
     """``Search.value``: c plus the motion penalty (mu2 = 0 without an anchor)."""
     cost: float = rec[REC_COST]
@@ -244,7 +252,7 @@ def _refine(prob: FloatArray, lim: FloatArray, mu2: float, anchor_a: float, anch
         elif ratio > 0.75 and size >= 0.9 * radius:
             radius = _py_min(2.0 * radius, 1.0)
         if v < best:
-            e[:] = trial
+            _copy(trial, e)
             best = v
         if radius < _MIN_STEP:
             break
@@ -325,9 +333,9 @@ def run(prob: FloatArray, box: FloatArray, anchor: FloatArray, has_anchor: bool,
         _refine(prob, lim, mu2, anchor_a, anchor_b, a, b, recs, hint, work, iwork)
         if not have or (_value(recs[_E], mu2, anchor_a, anchor_b)
                         < _value(recs[_BEST], mu2, anchor_a, anchor_b)):
-            recs[_BEST, :] = recs[_E]
+            _copy(recs[_E], recs[_BEST])
             have = True
-    rec[:] = recs[_BEST]
+    _copy(recs[_BEST], rec)
 
 
 @jit.kernel('int64(float64[::1], float64[:, ::1], boolean, boolean, int64, float64, '
@@ -360,8 +368,8 @@ def minima(prob: FloatArray, box: FloatArray, periodic_a: bool, periodic_b: bool
         # sorted(found, key=cost) is stable: a new minimum goes after equal costs.
         j = found
         while j > 0 and e[REC_COST] < recs[j - 1, REC_COST]:
-            recs[j, :] = recs[j - 1]
+            _copy(recs[j - 1], recs[j])
             j -= 1
-        recs[j, :] = e
+        _copy(e, recs[j])
         found += 1
     return found

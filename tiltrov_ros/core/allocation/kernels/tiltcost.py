@@ -266,7 +266,8 @@ def _blocks(prob: FloatArray, a: float, b: float, work: FloatArray) -> None:
         G11, G12, G22 = A1 * ca * ca + A2 * sa * sa, B1 * cc + B2 * ss, A1 * cb * cb + A2 * sb * sb
         g1, g2 = ca * u1 + sa * v1, cb * u2 + sb * v2
         o = _BLK + 30 * p
-        work[o:o + 30] = 0.0
+        for i in range(30):
+            work[o + i] = 0.0
         work[o], work[o + 1], work[o + 2], work[o + 3], work[o + 4] = G11, G12, G22, g1, g2
         # d/da, d/db, d2/da2, d2/dadb, d2/db2 of (G11, G12, G22, g1, g2)
         work[o + 5], work[o + 6], work[o + 8] = dA * s2a, -B1 * sc + B2 * cs, -sa * u1 + ca * v1
