@@ -165,6 +165,7 @@ def plan(prob: FloatArray, start: FloatArray, step: float, local_cost: float,
     """``..planner.plan(problem, start, step, local_cost, targets[:n_targets], horizon,
     kept or None)`` (kept NaN: None): out[0:2] the tilts, out[2:5] the target
     (a, b, c); False for None."""
+    n_targets = max(0, min(n_targets, targets.shape[0]))
     if n_targets == 0 or not math.isfinite(step):
         return False
     options = np.empty((3 * n_targets, ROUTE_SIZE))

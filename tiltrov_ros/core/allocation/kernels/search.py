@@ -103,6 +103,8 @@ def _best_cells(values: FloatArray, nb: int, count: int, order: IntArray,
     at least two cells apart among the 8 ``count`` best; returns how many.
     order: int64 scratch of at least 8 ``count``."""
     m = min(8 * count, values.shape[0])
+    if m <= 0:
+        return 0
     filled = 0
     for i in range(values.shape[0]):               # the m smallest, in sorted order
         v = values[i]
@@ -305,6 +307,7 @@ def run(prob: FloatArray, box: FloatArray, anchor: FloatArray, has_anchor: bool,
         rec: FloatArray) -> None:
     """``Search(problem, box, anchor if has_anchor else None, penalty,
     (periodic_a, periodic_b)).run(starts[:n_starts])`` into ``rec``."""
+    n_starts = max(0, min(n_starts, starts.shape[0]))
     mu2 = penalty * penalty if has_anchor else 0.0
     anchor_a, anchor_b = (anchor[0], anchor[1]) if has_anchor else (0.0, 0.0)
     lim = _limits(box, periodic_a, periodic_b)
@@ -343,7 +346,8 @@ def run(prob: FloatArray, box: FloatArray, anchor: FloatArray, has_anchor: bool,
 def minima(prob: FloatArray, box: FloatArray, periodic_a: bool, periodic_b: bool, count: int,
            below: float, recs: FloatArray) -> int:
     """``Search(problem, box, periodic=(periodic_a, periodic_b)).minima(count, below)``,
-    best first, into recs[:found]; returns found."""
+    best first, into recs[:found]; returns found (count: at most the rows of recs)."""
+    count = max(0, min(count, recs.shape[0]))
     lim = _limits(box, periodic_a, periodic_b)
     ga, gb, upper, cells, n = _grid(prob, box, periodic_a, periodic_b, 0.0, 0.0, 0.0, count)
     own = np.empty((_RECS, REC_SIZE))
