@@ -7,7 +7,8 @@
 * :func:`minima`: ``Search(problem, box, periodic=...).minima(count, below)``.
 
 A search is one call: the grid, the cells and every Newton step run here,
-with the scratch of :func:`.tiltcost.evaluate_into` allocated once per call.
+with every scratch array (that of :func:`.tiltcost.evaluate_into` too) carved
+from one float and one int allocation per call.
 Same operations in the same order as the reference (its constants are
 imported from it), so the answers agree to rounding.
 """
@@ -263,30 +264,46 @@ def _refine(prob: FloatArray, lim: FloatArray, mu2: float, anchor_a: float, anch
 # --------------------------------------------------------------------------- the searches
 
 @jit.kernel()
-def _grid(prob: FloatArray, box: FloatArray, periodic_a: bool, periodic_b: bool, mu2: float,
-          anchor_a: float, anchor_b: float, count: int
-          ) -> tuple[FloatArray, FloatArray, FloatArray, IntArray, int]:
-    """The grid over ``box``, its upper bounds and its ``count`` best cells:
-    (ga, gb, upper, cells, number of cells)."""
-    ga = np.empty(_grid_count(box[0, 0], box[0, 1], periodic_a))
-    gb = np.empty(_grid_count(box[1, 0], box[1, 1], periodic_b))
-    _grid_fill(box[0, 0], box[0, 1], periodic_a, ga)
-    _grid_fill(box[1, 0], box[1, 1], periodic_b, gb)
-    upper = np.empty(ga.shape[0] * gb.shape[0])
-    _grid_upper(prob, ga, gb, mu2, anchor_a, anchor_b, np.empty((2, gb.shape[0])), upper)
-    cells = np.empty(max(count, 1), dtype=np.int64)
-    n = _best_cells(upper, gb.shape[0], count, np.empty(8 * max(count, 1), dtype=np.int64),
-                    cells)
-    return ga, gb, upper, cells, n
+def _scratch(box: FloatArray, periodic_a: bool, periodic_b: bool, count: int, rows: int
+             ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray,
+                        FloatArray, FloatArray, IntArray, IntArray, IntArray, IntArray]:
+    """Every array of one search, as views of one float and one int allocation:
+    (ga, gb, upper, trig, lim, recs, work, refined, cells, order, hint, iwork) for
+    ``count`` cells and ``rows`` points refined at most."""
+    na = _grid_count(box[0, 0], box[0, 1], periodic_a)
+    nb = _grid_count(box[1, 0], box[1, 1], periodic_b)
+    o1 = na
+    o2 = o1 + nb
+    o3 = o2 + na * nb
+    o4 = o3 + 2 * nb
+    o5 = o4 + 4
+    o6 = o5 + _RECS * REC_SIZE
+    o7 = o6 + WORK_SIZE
+    f = np.empty(o7 + 2 * rows)
+    c = max(count, 1)
+    k = np.empty(9 * c + 4 + IWORK_SIZE, dtype=np.int64)
+    return (f[:o1], f[o1:o2], f[o2:o3], f[o3:o4].reshape((2, nb)), f[o4:o5],
+            f[o5:o6].reshape((_RECS, REC_SIZE)), f[o6:o7], f[o7:].reshape((rows, 2)),
+            k[:c], k[c:9 * c], k[9 * c:9 * c + 4], k[9 * c + 4:])
 
 
 @jit.kernel()
-def _limits(box: FloatArray, periodic_a: bool, periodic_b: bool) -> FloatArray:
-    """``Search.limits`` as (alo, ahi, blo, bhi): none along a periodic tilt."""
-    lim = np.empty(4)
+def _grid(prob: FloatArray, box: FloatArray, periodic_a: bool, periodic_b: bool, mu2: float,
+          anchor_a: float, anchor_b: float, count: int, ga: FloatArray, gb: FloatArray,
+          upper: FloatArray, trig: FloatArray, cells: IntArray, order: IntArray) -> int:
+    """The grid over ``box`` (ga, gb), its upper bounds and its ``count`` best cells;
+    returns the number of cells."""
+    _grid_fill(box[0, 0], box[0, 1], periodic_a, ga)
+    _grid_fill(box[1, 0], box[1, 1], periodic_b, gb)
+    _grid_upper(prob, ga, gb, mu2, anchor_a, anchor_b, trig, upper)
+    return _best_cells(upper, gb.shape[0], count, order, cells)
+
+
+@jit.kernel()
+def _limits(box: FloatArray, periodic_a: bool, periodic_b: bool, lim: FloatArray) -> None:
+    """``Search.limits`` into lim = (alo, ahi, blo, bhi): none along a periodic tilt."""
     lim[0], lim[1] = (-math.inf, math.inf) if periodic_a else (box[0, 0], box[0, 1])
     lim[2], lim[3] = (-math.inf, math.inf) if periodic_b else (box[1, 0], box[1, 1])
-    return lim
 
 
 @jit.kernel()
@@ -310,16 +327,14 @@ def run(prob: FloatArray, box: FloatArray, anchor: FloatArray, has_anchor: bool,
     n_starts = max(0, min(n_starts, starts.shape[0]))
     mu2 = penalty * penalty if has_anchor else 0.0
     anchor_a, anchor_b = (anchor[0], anchor[1]) if has_anchor else (0.0, 0.0)
-    lim = _limits(box, periodic_a, periodic_b)
-    ga, gb, _, cells, n = _grid(prob, box, periodic_a, periodic_b, mu2, anchor_a, anchor_b,
-                                SEEDS)
-    recs = np.empty((_RECS, REC_SIZE))
-    hint = np.zeros(4, dtype=np.int64)
-    work, iwork = np.empty(WORK_SIZE), np.empty(IWORK_SIZE, dtype=np.int64)
+    ga, gb, upper, trig, lim, recs, work, refined, cells, order, hint, iwork = _scratch(
+        box, periodic_a, periodic_b, SEEDS, SEEDS + n_starts)
+    _limits(box, periodic_a, periodic_b, lim)
+    n = _grid(prob, box, periodic_a, periodic_b, mu2, anchor_a, anchor_b, SEEDS, ga, gb, upper,
+              trig, cells, order)
     have = False
     nb = gb.shape[0]
-    refined = np.empty((n + n_starts, 2))          # where each refinement started
-    n_refined = 0
+    n_refined = 0                                   # refined[:n_refined]: where they started
     for k in range(n + n_starts):
         if k < n:
             a, b = ga[cells[k] // nb], gb[cells[k] % nb]
@@ -348,11 +363,11 @@ def minima(prob: FloatArray, box: FloatArray, periodic_a: bool, periodic_b: bool
     """``Search(problem, box, periodic=(periodic_a, periodic_b)).minima(count, below)``,
     best first, into recs[:found]; returns found (count: at most the rows of recs)."""
     count = max(0, min(count, recs.shape[0]))
-    lim = _limits(box, periodic_a, periodic_b)
-    ga, gb, upper, cells, n = _grid(prob, box, periodic_a, periodic_b, 0.0, 0.0, 0.0, count)
-    own = np.empty((_RECS, REC_SIZE))
-    hint = np.zeros(4, dtype=np.int64)
-    work, iwork = np.empty(WORK_SIZE), np.empty(IWORK_SIZE, dtype=np.int64)
+    ga, gb, upper, trig, lim, own, work, _, cells, order, hint, iwork = _scratch(
+        box, periodic_a, periodic_b, count, 0)
+    _limits(box, periodic_a, periodic_b, lim)
+    n = _grid(prob, box, periodic_a, periodic_b, 0.0, 0.0, 0.0, count, ga, gb, upper, trig,
+              cells, order)
     nb = gb.shape[0]
     found = 0
     for k in range(n):
