@@ -13,8 +13,8 @@ random tilts. Per call the least of three timings counts (a preempted call
 says nothing about either); p50, p99 and their ratios, in the same run. The
 kernels' answers are checked on the way (cost to 1e-9).
 
-Run: ``python bench/bench_allocation_kernels.py [--wrenches N]`` (or
-``tiltrov bench allocation_kernels``); ``main()`` returns the numbers as a dict.
+Run: ``python bench/bench_allocation_search.py [--wrenches N]`` (or
+``tiltrov bench allocation_search``); ``main()`` returns the numbers as a dict.
 """
 
 from __future__ import annotations
