@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+import inspect
 import math
 from pathlib import Path
 import sys
@@ -99,11 +100,14 @@ def _recording(calls: dict[str, list[Any]]) -> Iterator[None]:
 
 def _capture(n: int) -> dict[str, list[Any]]:
     rng = np.random.default_rng(7)
+    # The reference allocator (robust.fallback) makes the calls, whatever the backend.
+    reference = ({'backend': 'numpy'}
+                 if 'backend' in inspect.signature(ThrustAllocator).parameters else {})
     paper = ThrustAllocator(L, D, FMAX, mode='paper')
-    reach = ThrustAllocator(L, D, FMAX, max_tilt_step=STEP)
-    free = ThrustAllocator(L, D, FMAX)
+    reach = ThrustAllocator(L, D, FMAX, max_tilt_step=STEP, **reference)
+    free = ThrustAllocator(L, D, FMAX, **reference)
     wide = ThrustAllocator(L, D, FMAX, tilt_limits=(-2 * math.pi / 3, 2 * math.pi / 3),
-                           max_tilt_step=STEP)
+                           max_tilt_step=STEP, **reference)
     calls: dict[str, list[Any]] = {'run': [], 'minima': [], 'plan': []}
     with _recording(calls):
         for tau in _unattainable(rng, paper, n):
