@@ -1,5 +1,9 @@
 """Kernels of the reduced cost c(a, b): mirror :class:`..thrusts.TiltProblem` and :mod:`..local`.
 
+c(a, b) is the least ||W (B(a, b) f - tau)||^2 over the thrusts |f_i| <= f_max
+at tilts (a, b), eq. (4) split into its sums block (X, Z, M) and differences
+block (Y, K, N) (:mod:`..decomposition`), each 2 x 2 normal equations.
+
 * :func:`problem` fills a flat ``prob`` array (:mod:`.layout` ``PROB_*``) as
   ``TiltProblem(Geometry(l, d), tau, max_thrust, weights, available)`` does;
 * :func:`bounds` / :func:`bounds_grid`: ``TiltProblem.bounds`` at one or many
@@ -79,7 +83,8 @@ _FLOAT_MAX = float(np.finfo(np.float64).max)
 
 @jit.kernel('void(float64[::1], float64[::1], float64[::1])', group='allocation')
 def problem(cfg: FloatArray, tau: FloatArray, prob: FloatArray) -> None:
-    """Fill ``prob`` as ``TiltProblem(Geometry(l, d), tau, max_thrust, weights, available)``."""
+    """Fill ``prob`` as ``TiltProblem(Geometry(l, d), tau, max_thrust, weights, available)``:
+    the scaled wrench and limit, and the blocks of eq. (4)'s normal equations."""
     fmax = cfg[CFG_FMAX]
     big = abs(tau[0])
     for i in range(1, 6):
