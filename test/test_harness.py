@@ -94,7 +94,7 @@ def test_no_two_sessions_on_the_machine_take_the_same_domain() -> None:
     """Each session holds a lock on its domain for its whole life: a second claim (as a
     test session started meanwhile makes it) gets another one, and this session's own
     lock stays held while the other is taken and released."""
-    from conftest import claim_domain
+    from domains import claim_domain
     own = int(os.environ['ROS_DOMAIN_ID'])
     claims = [claim_domain() for _ in range(3)]
     try:
