@@ -86,6 +86,8 @@ REFERENCE = 'reference_publisher'
 RECORDER = 'bag_recorder'
 #: Every node of the package (a parameter file section naming none of them is reported).
 NODES = (PLANT, CONTROLLER, ALLOCATOR, REFERENCE, RECORDER)
+#: The stack's nodes: each reports what it published on /diagnostics, finally as it stops.
+STACK_NODES = (PLANT, CONTROLLER, ALLOCATOR, REFERENCE)
 
 # --------------------------------------------------------------------------- modes
 
