@@ -257,6 +257,12 @@ def test_batch_row_by_row_and_against_single_calls(kwargs: dict) -> None:
 def test_backend_is_chosen_per_allocator_and_checked() -> None:
     ref, ker = pair()
     assert (ref.backend, ker.backend) == ('numpy', 'numba')
+    # Built, an allocator never compiles again: every allocation kernel is compiled for
+    # its signatures and sealed (a call with other types would raise, not compile).
+    kernels = jit.registered(['allocation'])
+    assert {'allocate', 'allocate_fixed', 'thrusts_at', 'allocate_batch'} <= {
+        k.name.rsplit('.', 1)[1] for k in kernels}
+    assert all(k.sealed for k in kernels)
     assert ThrustAllocator(L, D).backend == jit.backend()
     with pytest.raises(AllocationError, match="backend must be None, 'numba' or 'numpy'"):
         ThrustAllocator(L, D, backend='fortran')
