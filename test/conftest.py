@@ -1,6 +1,7 @@
 """Test harness shared by the whole suite.
 
-* DDS isolation: one random ``ROS_DOMAIN_ID`` per test session and
+* DDS isolation: one ``ROS_DOMAIN_ID`` per test session that no other session on
+  the machine holds (a lock per domain, :func:`claim_domain`) and
   ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``, set before rclpy is imported
   anywhere, so two test runs on one machine (CI and a developer) never hear
   each other. Subprocesses started by tests inherit both.
@@ -17,19 +18,46 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
+import fcntl
 import os
 from pathlib import Path
 import random
+import tempfile
 import time
 from typing import Any
 
 from hypothesis import settings
 import pytest
 
+#: Domains a test session may take: 1..101 are valid on every platform with the
+#: default port mapping; 0 (the default domain) is left to interactive ROS users.
+TEST_DOMAINS = range(1, 102)
+_DOMAIN_LOCKS = Path(tempfile.gettempdir()) / 'tiltrov_ros-test-domains'
+def claim_domain() -> tuple[int, Any]:
+    """A DDS domain no other test session on this machine holds: each session locks
+    one (an flock on a file per domain, released when the process ends, however it
+    ends), tried in random order. A random pick alone let two sessions run at once
+    (a developer's and CI's, or several at once on one machine) meet with a chance
+    of a few per cent, and one then recorded the other's topics."""
+    _DOMAIN_LOCKS.mkdir(parents=True, exist_ok=True)
+    candidates = list(TEST_DOMAINS)
+    random.SystemRandom().shuffle(candidates)
+    for domain in candidates:
+        handle = open(_DOMAIN_LOCKS / f'{domain}.lock', 'a')     # held open: the lock
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            handle.close()
+            continue
+        return domain, handle
+    raise RuntimeError(f'every test DDS domain ({TEST_DOMAINS.start}..{TEST_DOMAINS.stop - 1}) '
+                       f'is held by another test session ({_DOMAIN_LOCKS})')
+
+
 if 'TILTROV_TEST_DOMAIN_ID' not in os.environ:
-    # 1..101: valid on every platform with the default port mapping; 0 (the
-    # default domain) is left to interactive ROS users.
-    os.environ['TILTROV_TEST_DOMAIN_ID'] = str(random.SystemRandom().randint(1, 101))
+    # A nested session (a test that runs pytest or colcon test) inherits its parent's.
+    _domain, _domain_lock = claim_domain()      # the lock is held open for the session
+    os.environ['TILTROV_TEST_DOMAIN_ID'] = str(_domain)
 os.environ['ROS_DOMAIN_ID'] = os.environ['TILTROV_TEST_DOMAIN_ID']
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.pop('ROS_STATIC_PEERS', None)
