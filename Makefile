@@ -39,6 +39,8 @@ $(STAMP): setup.py setup.cfg package.xml requirements/ros-jazzy.txt requirements
 		-r requirements/ros-jazzy.txt -e '.[bags,campaign,dev]'
 	@# colcon must never crawl into the venv (the ROS wheels ship package.xml files).
 	@touch $(VENV)/COLCON_IGNORE
+	@# Compile the kernels now, so that no node and no first run waits for numba.
+	$(VENV)/bin/tiltrov warmup
 	@touch $(STAMP)
 
 ros2-cli: $(STAMP)
