@@ -227,6 +227,12 @@ def warmup(groups: Iterable[str] | None = None, *, seal: bool = True) -> float:
     return elapsed
 
 
+def overloads() -> dict[str, int]:
+    """Registered kernel -> how many type signatures it has compiled or loaded so far
+    (unchanged over a run: nothing was compiled nor loaded during it)."""
+    return {k.name: len(k.dispatcher.overloads) for k in _STATE.kernels}
+
+
 @contextmanager
 def compilations() -> Iterator[list[str]]:
     """Within the block, the list of the kernels numba compiles (not those it loads from
