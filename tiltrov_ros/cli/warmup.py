@@ -6,8 +6,8 @@
     tiltrov warmup plant control
 
 Prints the backend, where the compiled code is cached and, per group, the
-seconds it took and how many kernels numba compiled (the rest came from the
-cache). ``make install`` runs it; run it once after a workspace install
+seconds it took and whether numba compiled its kernels or loaded them from
+the cache. ``make install`` runs it; run it once after a workspace install
 (colcon) so that no node compiles at start. With the numpy backend (numba
 absent, or ``TILTROV_BACKEND=numpy``) there is nothing to compile.
 """
@@ -44,7 +44,8 @@ def run(args: argparse.Namespace) -> int:
             seconds = jit.warmup((group,))
         kernels = len(jit.registered((group,)))
         total += seconds
-        print(f'  {group:11s} {seconds:7.2f} s  {kernels} kernel(s), '
-              f'{len(compiled)} compiled, the rest loaded from the cache')
+        how = (f'compiled ({len(compiled)} functions)' if compiled
+               else 'loaded from the cache' if kernels else 'none in this version')
+        print(f'  {group:11s} {seconds:7.2f} s  {kernels} kernel(s): {how}')
     print(f'  {"total":11s} {total:7.2f} s')
     return 0
