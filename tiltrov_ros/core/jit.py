@@ -110,7 +110,8 @@ def _configure_cache() -> str | None:
     """Point numba's cache somewhere writable before numba is imported."""
     if os.environ.get('NUMBA_CACHE_DIR'):
         return os.environ['NUMBA_CACHE_DIR']
-    if all(_writable(d) for d in (_PACKAGE_DIR / 'core',)):
+    kernel_dirs = (_PACKAGE_DIR / 'core', _PACKAGE_DIR / 'core' / 'allocation' / 'kernels')
+    if all(_writable(d) for d in kernel_dirs if d.is_dir()):
         return None                                  # numba's default: beside the source
     directory = _user_cache_dir()
     os.environ['NUMBA_CACHE_DIR'] = directory
