@@ -104,6 +104,26 @@ def test_a_sealed_kernel_refuses_new_types_instead_of_compiling() -> None:
     assert compiled == []
 
 
+def test_every_stack_node_reports_its_backend_and_kernel_warmup(ros: Any) -> None:
+    from ros_stack import Probe, report
+
+    from tiltrov_ros.core.names import BACKEND_KEY, KERNEL_WARMUP_KEY
+    from tiltrov_ros.stack.inprocess import build_nodes
+    from tiltrov_ros.stack.specs import LaunchOptions, stack_specs
+
+    probe = Probe(ros.node('diagnostics_probe'), ['/diagnostics'])
+    specs, _, _ = stack_specs(LaunchOptions(scenario='pitch_hold', controller='pid'))
+    nodes = [ros.add(node) for node in build_nodes(specs, ros.context)]
+    assert len(nodes) == 4
+    for node in nodes:
+        values = report(ros, probe, node)
+        assert values[BACKEND_KEY] == jit.backend(), node.get_name()
+        assert float(values[KERNEL_WARMUP_KEY]) == pytest.approx(node.kernel_warmup,
+                                                                 rel=1e-5, abs=1e-9)
+        if node.kernel_groups and jit.compiled():
+            assert all(k.sealed for k in jit.registered(node.kernel_groups))
+
+
 # -- read-only installs ------------------------------------------------------------------
 
 def _read_only(dirs: list[Path], argv: list[str], env: dict[str, str], cwd: Path
