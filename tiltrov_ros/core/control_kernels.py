@@ -6,23 +6,28 @@ ZYX Euler angles as :func:`~tiltrov_ros.core.kinematics.euler_from_quat`,
 :mod:`tiltrov_ros.core.controllers`, which stay the reference; tests pin
 these kernels to it (1e-12 relative). Python ends in the controllers'
 ``update``: they check the argument shapes, keep the PID's last time and the
-switching baseline's mode rule, and call :func:`control_law` once per update.
+switching baseline's mode rule, and call :func:`control_law` once per update
+through :class:`CompiledLaw`.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 import math
+from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
+from tiltrov_ros.core import jit
 from tiltrov_ros.core.jit import kernel
 from tiltrov_ros.core.kinematics import GIMBAL_GUARD_COS, GIMBAL_LOCK_COS
+from tiltrov_ros.core.params import RobotParams
 
 FloatArray = NDArray[np.float64]
 
 # --------------------------------------------------------------------------- layouts
-# cfg: float64[CFG_SIZE], built once per controller (controllers._law_config).
+# cfg: float64[CFG_SIZE], built once per controller (law_config).
 CFG_KP = 0            # 6 entries: Kp, earth frame (x y z roll pitch yaw)
 CFG_KD = 6            # 6 entries: Kd
 CFG_KI = 12           # 6 entries: Ki (pid)
@@ -221,3 +226,70 @@ def control_law(law: int, dt: float, integrate: bool, position: FloatArray,
         out[OUT_GROUPS + 1] = math.sqrt((e[2] / ps) ** 2 + (e[3] / an) ** 2
                                         + (e[4] / an) ** 2)
     return 0
+
+
+# --------------------------------------------------------------------------- Python side
+
+def law_config(kp: Sequence[float], kd: Sequence[float], ki: Sequence[float] = (0.0,) * 6,
+               max_integral: ArrayLike = (0.0,) * 6, *, robot: RobotParams | None = None,
+               scales: tuple[float, float] = (0.0, 0.0)) -> FloatArray:
+    """The cfg array of a law: gains, the PID's integral clamp and nominal robot (W, B,
+    r_g, r_b for g_hat), the switching baseline's (position, angle) error scales."""
+    cfg = np.zeros(CFG_SIZE)
+    cfg[CFG_KP:CFG_KP + 6] = kp
+    cfg[CFG_KD:CFG_KD + 6] = kd
+    cfg[CFG_KI:CFG_KI + 6] = ki
+    cfg[CFG_MAX_INTEGRAL:CFG_MAX_INTEGRAL + 6] = max_integral
+    if robot is not None:
+        cfg[CFG_W], cfg[CFG_B] = robot.weight, robot.buoyancy
+        cfg[CFG_RG:CFG_RG + 3] = robot.r_g
+        cfg[CFG_RB:CFG_RB + 3] = robot.r_b
+    cfg[CFG_POSITION_SCALE], cfg[CFG_ANGLE_SCALE] = scales
+    return cfg
+
+
+def _vector(value: ArrayLike, n: int, what: str) -> FloatArray:
+    """``value`` as a C-contiguous float64 (n,) array (itself when it already is one)."""
+    if (type(value) is np.ndarray and value.dtype == np.float64 and value.shape == (n,)
+            and value.flags.c_contiguous):
+        return value
+    arr = np.ascontiguousarray(value, dtype=np.float64)
+    if arr.shape != (n,):
+        raise ValueError(f'{what}: expected {n} values, got shape {arr.shape}')
+    return arr
+
+
+class CompiledLaw:
+    """One controller's compiled law (:func:`control_law`) and its buffers.
+
+    Built once per controller (compiling or loading the kernels then, never in a
+    tick); ``__call__`` checks the inputs' shapes, calls the kernel and returns its
+    ``out`` buffer (reused: copy what you keep). A quaternion that cannot be
+    normalised raises ValueError, as :func:`~tiltrov_ros.core.kinematics.quat_normalize`
+    does, and changes nothing.
+    """
+
+    def __init__(self, law: int, cfg: FloatArray) -> None:
+        self.law = law
+        self.cfg = cfg
+        self.work = np.zeros(WORK_SIZE)
+        self.out = np.zeros(OUT_SIZE)
+        self._no_integral = np.zeros(6)
+        jit.warmup(('control',))
+
+    def __call__(self, position: ArrayLike, quaternion: ArrayLike, nu: ArrayLike,
+                 reference: Any, *, dt: float = 0.0, integrate: bool = False,
+                 integral: FloatArray | None = None) -> FloatArray:
+        """``reference``: a controllers.Reference (position, quaternion, velocity)."""
+        q = _vector(quaternion, 4, 'quaternion')
+        q_d = _vector(reference.quaternion, 4, 'reference quaternion')
+        status = control_law(self.law, float(dt), integrate, _vector(position, 3, 'position'),
+                             q, _vector(nu, 6, 'nu'),
+                             _vector(reference.position, 3, 'reference position'), q_d,
+                             _vector(reference.velocity, 6, 'reference velocity'),
+                             self.cfg, self._no_integral if integral is None else integral,
+                             self.work, self.out)
+        if status:
+            bad = q if status == BAD_QUATERNION else q_d
+            raise ValueError(f'not a valid quaternion: {bad!r}')
+        return self.out

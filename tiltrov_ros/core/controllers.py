@@ -281,63 +281,6 @@ def tracking_error(position: ArrayLike, quaternion: ArrayLike, nu: ArrayLike,
     return TrackingError(eta, e, e_dot, Jm)
 
 
-def _vector(value: ArrayLike, n: int, what: str) -> FloatArray:
-    """``value`` as a C-contiguous float64 (n,) array (itself when it already is one)."""
-    if (type(value) is np.ndarray and value.dtype == np.float64 and value.shape == (n,)
-            and value.flags.c_contiguous):
-        return value
-    arr = np.ascontiguousarray(value, dtype=np.float64)
-    if arr.shape != (n,):
-        raise ValueError(f'{what}: expected {n} values, got shape {arr.shape}')
-    return arr
-
-
-class CompiledLaw:
-    """One controller's compiled law (:func:`.control_kernels.control_law`) and its buffers.
-
-    Built once per controller; ``__call__`` checks the inputs' shapes, calls the
-    kernel and returns its ``out`` buffer (reused: copy what you keep).
-    """
-
-    def __init__(self, law: int, gains: Gains, *, max_integral: ArrayLike = (0.0,) * 6,
-                 robot: RobotParams | None = None,
-                 settings: SwitchingSettings | None = None) -> None:
-        self.law = law
-        cfg = np.zeros(ck.CFG_SIZE)
-        cfg[ck.CFG_KP:ck.CFG_KP + 6] = gains.kp
-        cfg[ck.CFG_KD:ck.CFG_KD + 6] = gains.kd
-        cfg[ck.CFG_KI:ck.CFG_KI + 6] = gains.ki
-        cfg[ck.CFG_MAX_INTEGRAL:ck.CFG_MAX_INTEGRAL + 6] = max_integral
-        if robot is not None:
-            cfg[ck.CFG_W], cfg[ck.CFG_B] = robot.weight, robot.buoyancy
-            cfg[ck.CFG_RG:ck.CFG_RG + 3] = robot.r_g
-            cfg[ck.CFG_RB:ck.CFG_RB + 3] = robot.r_b
-        if settings is not None:
-            cfg[ck.CFG_POSITION_SCALE] = settings.position_scale
-            cfg[ck.CFG_ANGLE_SCALE] = settings.angle_scale
-        self.cfg = cfg
-        self.work = np.zeros(ck.WORK_SIZE)
-        self.out = np.zeros(ck.OUT_SIZE)
-        self._no_integral = np.zeros(6)
-        jit.warmup(('control',))            # compiled (or loaded) now, never in a tick
-
-    def __call__(self, position: ArrayLike, quaternion: ArrayLike, nu: ArrayLike,
-                 reference: Reference, *, dt: float = 0.0, integrate: bool = False,
-                 integral: FloatArray | None = None) -> FloatArray:
-        q = _vector(quaternion, 4, 'quaternion')
-        q_d = _vector(reference.quaternion, 4, 'reference quaternion')
-        status = ck.control_law(self.law, float(dt), integrate, _vector(position, 3, 'position'),
-                                q, _vector(nu, 6, 'nu'),
-                                _vector(reference.position, 3, 'reference position'), q_d,
-                                _vector(reference.velocity, 6, 'reference velocity'),
-                                self.cfg, self._no_integral if integral is None else integral,
-                                self.work, self.out)
-        if status:
-            bad = q if status == ck.BAD_QUATERNION else q_d
-            raise ValueError(f'not a valid quaternion: {bad!r}')
-        return self.out
-
-
 class PDController:
     """Eq. (16): tau = J(eta)^T (Kp e + Kd e_dot)."""
 
@@ -346,7 +289,8 @@ class PDController:
         self._kp = np.array(gains.kp)
         self._kd = np.array(gains.kd)
         self.compiled = jit.compiled()
-        self._law = CompiledLaw(ck.LAW_PD, gains) if self.compiled else None
+        self._law = (ck.CompiledLaw(ck.LAW_PD, ck.law_config(gains.kp, gains.kd))
+                     if self.compiled else None)
 
     def reset(self) -> None:
         """PD has no state."""
@@ -380,8 +324,9 @@ class PIDController:
         with np.errstate(divide='ignore', invalid='ignore'):
             self._max_integral = np.where(self._ki > 0, limit / self._ki, 0.0)
         self.compiled = jit.compiled()
-        self._law = (CompiledLaw(ck.LAW_PID, gains, max_integral=self._max_integral,
-                                 robot=robot) if self.compiled else None)
+        self._law = (ck.CompiledLaw(ck.LAW_PID, ck.law_config(
+            gains.kp, gains.kd, gains.ki, self._max_integral, robot=robot))
+            if self.compiled else None)
         self.reset()
 
     @property
@@ -430,8 +375,9 @@ class SwitchingController:
         self._kp = np.array(gains.kp)
         self._kd = np.array(gains.kd)
         self.compiled = jit.compiled()
-        self._law = (CompiledLaw(ck.LAW_SWITCHING, gains, settings=settings)
-                     if self.compiled else None)
+        self._law = (ck.CompiledLaw(ck.LAW_SWITCHING, ck.law_config(
+            gains.kp, gains.kd, scales=(settings.position_scale, settings.angle_scale)))
+            if self.compiled else None)
         self.reset()
 
     def reset(self) -> None:
