@@ -18,6 +18,10 @@ FRAME_BODY = 'base_link_frd'
 #: Their ENU/FLU siblings (REP-103, REP-105), as a robot's state estimator names them.
 FRAME_EARTH_ENU = 'odom'
 FRAME_BODY_FLU = 'base_link'
+#: ``header.frame_id`` of a safety command that answers no wrench_cmd: the allocator's
+#: zero thrust (tilts held) while wrench_cmd is stale. Such a command is also stamped
+#: off the control-tick grid (ARCHITECTURE.md, "Time and stamps").
+FAILSAFE_FRAME = 'failsafe'
 
 # --------------------------------------------------------------------------- joints
 
@@ -87,6 +91,8 @@ REFERENCE = 'reference_publisher'
 RECORDER = 'bag_recorder'
 #: Every node of the package (a parameter file section naming none of them is reported).
 NODES = (PLANT, CONTROLLER, ALLOCATOR, REFERENCE, RECORDER)
+#: The stack's nodes: each reports what it published on /diagnostics, finally as it stops.
+STACK_NODES = (PLANT, CONTROLLER, ALLOCATOR, REFERENCE)
 
 # --------------------------------------------------------------------------- modes
 
