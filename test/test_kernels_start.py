@@ -182,7 +182,7 @@ def test_a_read_only_install_with_no_writable_home_caches_in_the_temporary_direc
     assert report['code'] == 0
     assert report['file'].startswith(str(install))
     cache = Path(report['jit']['cache_dir'])
-    assert cache.parent == tmp and cache.name.startswith('tiltrov_ros-numba-')
+    assert cache.parent.parent == tmp and cache.parent.name.startswith('tiltrov_ros-numba-')
     assert any(cache.rglob('*.nbi'))                   # the kernels were cached there
     assert not any(install.rglob('*.nbi')) and not any(home.iterdir())
     metrics = json.loads((out / 'metrics.json').read_text())
@@ -200,8 +200,8 @@ def test_a_read_only_install_caches_in_the_users_cache_directory(tmp_path: Path)
     assert result.returncode == 0, result.stderr
     report = _last_json(result.stdout)
     assert report['jit']['backend'] == 'numba'
-    assert report['jit']['cache_dir'] == str(home / '.cache' / 'tiltrov_ros' / 'numba')
-    assert (home / '.cache' / 'tiltrov_ros' / 'numba').is_dir()
+    cache = Path(report['jit']['cache_dir'])
+    assert cache.parent == home / '.cache' / 'tiltrov_ros' / 'numba' and cache.is_dir()
 
 
 # -- the numpy reference -----------------------------------------------------------------
@@ -278,3 +278,32 @@ def test_tiltrov_warmup_names_the_backend_the_cache_and_each_group() -> None:
     assert numpy.returncode == 0
     assert numpy.stdout.splitlines() == ['backend: numpy (TILTROV_BACKEND=numpy)',
                                          'nothing to compile: the numpy reference runs']
+
+
+def test_the_cache_is_keyed_by_the_sources_of_the_core(tmp_path: Path) -> None:
+    """An edit anywhere in the core (a kernel called by another, a constant it imports)
+    gives another cache directory, and the stale one is removed: numba itself checks a
+    cached kernel against its own file only, and once ran an edited callee's old code
+    inside a cached caller."""
+    install = _copy_package(tmp_path / 'install')
+    env = _env(PYTHONPATH=str(install))
+    code = ('import json\nfrom tiltrov_ros.core import jit\n'
+            'print(json.dumps([jit.backend(), jit.describe()["cache_dir"], jit.source_key()]))\n')
+
+    def cache_dir() -> tuple[str, Path, str]:
+        result = subprocess.run([sys.executable, '-c', code], env=env, capture_output=True,
+                                text=True, timeout=120, cwd=tmp_path)
+        assert result.returncode == 0, result.stderr
+        name, directory, key = _last_json(result.stdout)
+        return name, Path(directory) if directory else Path(), key
+
+    name, first, key = cache_dir()
+    if name != 'numba':
+        pytest.skip('numba is not installed: no kernel cache')
+    in_package = install / 'tiltrov_ros' / 'core' / '__pycache__' / 'numba'
+    assert first.name == key and first.parent == in_package
+    callee = install / 'tiltrov_ros' / 'core' / 'allocation' / 'kernels' / 'limits.py'
+    callee.write_text(callee.read_text() + '\n# edited\n')
+    _, second, key2 = cache_dir()
+    assert key2 != key and second.parent == first.parent and second.is_dir()
+    assert not first.exists()

@@ -26,11 +26,15 @@ runs and that manages numba:
   use.
 * :func:`compilations` -- a context manager listing what numba compiles
   meanwhile (the tests' proof that nothing compiles after construction).
-* The cache: numba writes it beside the source when the package directory is
-  writable (a checkout, a venv); in a read-only install (a colcon install
-  space under /opt, a system site-packages) it goes to
-  ``$XDG_CACHE_HOME/tiltrov_ros/numba`` (``~/.cache/...``), else to the
-  temporary directory. ``NUMBA_CACHE_DIR`` set by the user always wins.
+* The cache: in the package (``core/__pycache__/numba``) when it is writable (a
+  checkout, a venv); in a read-only install (a colcon install space under
+  /opt, a system site-packages) in ``$XDG_CACHE_HOME/tiltrov_ros/numba``
+  (``~/.cache/...``), else in the temporary directory; each in a subdirectory
+  named by a hash of the core's sources (:func:`source_key`). numba checks a
+  cached kernel against its own file only, not against the kernels it calls in
+  other modules (nor the constants it imports): an edited callee left a stale
+  caller in the cache. A new key starts a fresh cache; older keys are removed.
+  ``NUMBA_CACHE_DIR`` set by the user always wins, as it is.
 """
 
 from __future__ import annotations
@@ -38,9 +42,11 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+import hashlib
 import importlib
 import os
 from pathlib import Path
+import shutil
 import sys
 import tempfile
 import time
@@ -106,14 +112,39 @@ def _user_cache_dir() -> str:
     raise OSError('no writable directory for the compiled kernels\' cache')
 
 
-def _configure_cache() -> str | None:
-    """Point numba's cache somewhere writable before numba is imported."""
+def source_key() -> str:
+    """A hash of every source file of the core (names and contents): the kernels and
+    all they call or import. 16 hex digits."""
+    core = _PACKAGE_DIR / 'core'
+    digest = hashlib.sha256()
+    for path in sorted(core.rglob('*.py')):
+        digest.update(path.relative_to(core).as_posix().encode() + b'\0')
+        digest.update(path.read_bytes() + b'\0')
+    return digest.hexdigest()[:16]
+
+
+def _keyed(base: Path) -> str:
+    """``base/<source key>``, created; the other keys' directories in ``base`` removed
+    (best effort: a cache another checkout still uses is rebuilt there next time)."""
+    key = source_key()
+    directory = base / key
+    directory.mkdir(parents=True, exist_ok=True)
+    for other in base.iterdir():
+        if other.name != key and other.is_dir() and len(other.name) == len(key):
+            shutil.rmtree(other, ignore_errors=True)
+    return str(directory)
+
+
+def _configure_cache() -> str:
+    """Point numba's cache somewhere writable, keyed by the sources, before numba is
+    imported."""
     if os.environ.get('NUMBA_CACHE_DIR'):
         return os.environ['NUMBA_CACHE_DIR']
-    kernel_dirs = (_PACKAGE_DIR / 'core', _PACKAGE_DIR / 'core' / 'allocation' / 'kernels')
-    if all(_writable(d) for d in kernel_dirs if d.is_dir()):
-        return None                                  # numba's default: beside the source
-    directory = _user_cache_dir()
+    core = _PACKAGE_DIR / 'core'
+    if _writable(core):
+        directory = _keyed(core / '__pycache__' / 'numba')
+    else:
+        directory = _keyed(Path(_user_cache_dir()))
     os.environ['NUMBA_CACHE_DIR'] = directory
     if 'numba' in sys.modules:                       # imported before us: tell it directly
         sys.modules['numba'].config.CACHE_DIR = directory
@@ -158,9 +189,7 @@ def describe() -> dict[str, Any]:
     """The backend, why, the cache directory and the warm-up times: for diagnostics and
     a run's ``run_info``."""
     name = backend()
-    cache = _STATE.cache_dir
-    if name == 'numba' and cache is None:
-        cache = str(_PACKAGE_DIR)
+    cache = _STATE.cache_dir if name == 'numba' else None
     return {'backend': name, 'reason': _STATE.reason, 'cache_dir': cache,
             'warmup_seconds': dict(_STATE.warm_seconds)}
 
