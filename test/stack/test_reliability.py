@@ -166,12 +166,11 @@ class _SimTime:
 
 #: The plant's odom readers before it starts: the controller, the recorder and the test.
 _WAIT_FOR_THE_TEST = ('--param', 'plant_simulator:startup_subscribers:=3')
-#: The stack's processes talk over UDP only, here: with Fast DDS's shared-memory
-#: transport a process held by SIGSTOP can hold up the others writing to it (the
-#: lockstep loop once stalled 11 s at its first step, the recorder stopped). That is
-#: an artefact of SIGSTOP, not of a slow recorder, which these tests are about; over
-#: UDP the writers' history and retransmissions decide what arrives.
-_NO_SHARED_MEMORY = {'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4'}
+#: s of sim: the first step after the first tick. In lockstep every node has then
+#: published (the tick's answer), so each has seen the recorder read all its topics
+#: (nodes hold their output until it does): the recorder stopped any earlier can leave
+#: a node waiting 10 s for it (RECORDER_WAIT), and the loop stalled that long at 0 s.
+_FIRST_TICK_ANSWERED = 0.01
 
 
 def _recorder_stopped(ros: Any, tmp_path: Path, bag: Path, args: tuple[str, ...],
@@ -181,8 +180,7 @@ def _recorder_stopped(ros: Any, tmp_path: Path, bag: Path, args: tuple[str, ...]
     the sim time reaches ``stop_at`` s and resumed (SIGCONT) ``behind`` s after
     ``resume_when(sim time, pids)`` holds: the launch's exit code and output."""
     sim = _SimTime(ros.node('sim_time_probe'))
-    launch = LaunchProcess(tmp_path, *args, *_WAIT_FOR_THE_TEST, '--record', str(bag),
-                           env=_NO_SHARED_MEMORY)
+    launch = LaunchProcess(tmp_path, *args, *_WAIT_FOR_THE_TEST, '--record', str(bag))
     try:
         pids = launch.wait_running()
         assert ros.spin_until(lambda: sim.reached(stop_at), timeout=timeout), launch.output
@@ -613,7 +611,7 @@ def test_a_recorder_that_falls_behind_fails_the_launch_and_bag_info_says_what_wa
 
 @pytest.mark.slow
 def test_a_recorder_behind_at_the_end_of_a_run_loses_nothing(ros: Any, tmp_path: Path) -> None:
-    """The recorder stopped from the first step of a recorded 8 s lockstep run and
+    """The recorder stopped from the first tick of a recorded 8 s lockstep run and
     resumed 1.5 s after the plant's last state (a loaded machine: the recorder that far
     behind when the run ends; fewer samples than the writers keep, so none is dropped
     before it comes back). Every node waits until its readers acknowledged its messages
@@ -623,7 +621,7 @@ def test_a_recorder_behind_at_the_end_of_a_run_loses_nothing(ros: Any, tmp_path:
     code 0)."""
     bag = tmp_path / 'bag'
     code, output = _recorder_stopped(
-        ros, tmp_path, bag, ('--duration', '8'), 0,
+        ros, tmp_path, bag, ('--duration', '8'), _FIRST_TICK_ANSWERED,
         lambda sim, _: sim.reached(8), timeout=120.0,
         behind=1.5)     # how far behind the recorder is: the attack's input
     assert code == 0, output
@@ -641,7 +639,7 @@ def test_a_recorder_behind_at_the_end_of_a_run_loses_nothing(ros: Any, tmp_path:
 @pytest.mark.slow
 def test_a_recorder_still_behind_when_the_nodes_give_up_fails_the_launch(
         ros: Any, tmp_path: Path) -> None:
-    """The recorder stopped from the first step of a 60 s lockstep run and resumed only
+    """The recorder stopped from the first tick of a 60 s lockstep run and resumed only
     once every other node has exited (each gave up waiting for it): their last messages
     are lost: the plant's 8 MB of samples overflow what a transport holds for a stopped
     reader (a socket here: 4 MB at most). The launch exits 1 naming each node whose
@@ -654,7 +652,7 @@ def test_a_recorder_still_behind_when_the_nodes_give_up_fails_the_launch(
 
     bag = tmp_path / 'bag'
     code, output = _recorder_stopped(
-        ros, tmp_path, bag, ('--duration', '60'), 0,
+        ros, tmp_path, bag, ('--duration', '60'), _FIRST_TICK_ANSWERED,
         lambda _, pids: not any(alive(pids[n]) for n in STACK), timeout=120.0)
     assert code == 1, output
     found = _loss_report(bag, output, _bag_info(bag))
