@@ -29,7 +29,7 @@ help:
 	@echo "make bench    benchmarks (speed ratios against baselines measured in the same run)"
 	@echo "make soak     one hour of simulated time in lockstep (not part of make test)"
 	@echo "make figures  regenerate the results page (docs/results.md) and its figures"
-	@echo "make docs     regenerate docs/parameters.md from the parameter tables"
+	@echo "make docs     regenerate docs/parameters.md and urdf/tiltrov.urdf from the code"
 	@echo "make campaign a small random station-keeping campaign on a local Dask cluster"
 
 install: $(STAMP) $(TF2_STAMP)
@@ -84,6 +84,7 @@ figures: $(STAMP)
 
 docs: $(STAMP)
 	$(PY) -m tiltrov_ros.nodes.parameter_docs docs/parameters.md
+	$(PY) -m tiltrov_ros.core.robot_description urdf/tiltrov.urdf
 
 # A small version by default; `make campaign SAMPLES=200 CAMPAIGN_OUT=runs/camp` for the
 # real one. --resume: run again, it only finishes what is missing and re-summarizes.
