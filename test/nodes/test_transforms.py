@@ -21,15 +21,18 @@ import numpy as np
 import pytest
 from ros_stack import LATCHED, NS, TOPIC_TYPES, Probe, require_tf2_msgs, run_stack
 from std_msgs.msg import String
-
-from tiltrov_ros.core.kinematics import Rquat
-from tiltrov_ros.core.names import (
-    FRAME_BODY,
-    FRAME_BODY_FLU,
-    FRAME_EARTH,
-    FRAME_EARTH_ENU,
-    THRUSTER_LINKS,
+from tf_tree import (
+    REP105,
+    TREE,
+    assert_is_the_odometry,
+    assert_one_tree,
+    body_in_odom_ned,
+    by_child,
+    pose,
+    tf_stamp,
 )
+
+from tiltrov_ros.core.names import FRAME_BODY, THRUSTER_LINKS
 from tiltrov_ros.core.thrust_map import thruster_directions, thruster_positions
 from tiltrov_ros.nodes.conversions import stamp_ns
 from tiltrov_ros.nodes.plant_simulator import PlantSimulator
@@ -39,35 +42,6 @@ from tiltrov_ros.stack.specs import LaunchOptions
 TFMessage = require_tf2_msgs()
 TOPIC_TYPES.setdefault('/tf', TFMessage)
 TOPIC_TYPES.setdefault('tf', TFMessage)
-
-#: The tree: child -> parent.
-TREE = {FRAME_EARTH: FRAME_EARTH_ENU, FRAME_BODY_FLU: FRAME_EARTH_ENU,
-        FRAME_BODY: FRAME_BODY_FLU, **dict.fromkeys(THRUSTER_LINKS, FRAME_BODY)}
-#: The REP-105 relations: child -> rotation matrix of the child's axes in the parent.
-#: NED's north, east, down are ENU's y, x, -z; FRD's forward, starboard, down are
-#: FLU's x, -y, -z.
-REP105 = {FRAME_EARTH: np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]]),
-          FRAME_BODY: np.diag([1.0, -1.0, -1.0])}
-
-
-def pose(t: Any) -> tuple[np.ndarray, np.ndarray]:
-    """(R, p) of a TransformStamped: the child's axes and origin in the parent."""
-    r, v = t.transform.rotation, t.transform.translation
-    return Rquat([r.w, r.x, r.y, r.z]), np.array([v.x, v.y, v.z])
-
-
-def compose(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray]
-            ) -> tuple[np.ndarray, np.ndarray]:
-    return a[0] @ b[0], a[0] @ b[1] + a[1]
-
-
-def inverse(a: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    return a[0].T, -a[0].T @ a[1]
-
-
-def by_child(*messages: Any) -> dict[str, Any]:
-    return {t.child_frame_id: t for m in messages for t in m.transforms}
-
 
 def _tf_at(probe: Probe, ns: int) -> bool:
     """The probe has /tf stamped ``ns``."""
@@ -113,18 +87,11 @@ def test_the_tree_is_complete_at_every_step_and_each_frame_has_one_parent(
     run = lockstep_tree['run']
     odom_stamps = sorted(set(run.probe.stamps('odom')))
     assert odom_stamps == [i * 10_000_000 for i in range(201)]
-    tf = {}
-    for message in run.probe['/tf']:
-        stamps = {stamp_ns(t.header.stamp) for t in message.transforms}
-        assert len(stamps) == 1           # one instant per message
-        tf[stamps.pop()] = message
+    tf = {tf_stamp(message): message for message in run.probe['/tf']}
     assert sorted(tf) == odom_stamps
     (static,) = lockstep_tree['static']
     for message in tf.values():
-        children = [t.child_frame_id for t in (*static.transforms, *message.transforms)]
-        assert sorted(children) == sorted(TREE)          # each frame once: one parent
-        assert {t.child_frame_id: t.header.frame_id
-                for t in (*static.transforms, *message.transforms)} == TREE
+        assert_one_tree(static, message)
 
 
 @pytest.mark.slow
@@ -134,22 +101,13 @@ def test_odom_ned_to_base_link_frd_composed_from_the_tree_is_the_odometry(
     (base_link -> base_link_frd), at every step; and each thruster link at r_i with its
     x axis along eq. (4)'s thrust direction at the joint_states tilts."""
     run, (static,) = lockstep_tree['run'], lockstep_tree['static']
-    fixed = by_child(static)
     odom = run.probe.by_stamp('odom')
     joints = run.probe.by_stamp('joint_states')
     config = run.config
     for message in run.probe['/tf']:
+        ns = tf_stamp(message)
+        assert_is_the_odometry(body_in_odom_ned(static, message), odom[ns])
         moving = by_child(message)
-        ns = stamp_ns(moving[FRAME_BODY_FLU].header.stamp)
-        rotation, position = compose(compose(inverse(pose(fixed[FRAME_EARTH])),
-                                             pose(moving[FRAME_BODY_FLU])),
-                                     pose(fixed[FRAME_BODY]))
-        o = odom[ns].pose.pose
-        np.testing.assert_allclose(position, [o.position.x, o.position.y, o.position.z],
-                                   rtol=0, atol=1e-12)
-        np.testing.assert_allclose(
-            rotation, Rquat([o.orientation.w, o.orientation.x, o.orientation.y,
-                             o.orientation.z]), rtol=0, atol=1e-12)
         tilts = list(joints[ns].position[:2])
         directions = thruster_directions(*tilts)
         positions = thruster_positions(config.robot.length, config.robot.width)
