@@ -83,15 +83,19 @@ def tilt_joints(length: float, width: float) -> tuple[TiltJoint, ...]:
     return tuple(out)
 
 
-def link_quaternions(joints: tuple[TiltJoint, ...], tilt_front: float,
-                     tilt_rear: float) -> FloatArray:
+def link_quaternions(joints: tuple[TiltJoint, ...], tilt_front: float, tilt_rear: float,
+                     out: FloatArray | None = None) -> FloatArray:
     """Orientation (w, x, y, z) of each thruster link in ``base_link_frd`` at the tilts,
-    shape (4, 4): ``q_z(yaw) q_y(gamma)`` written out."""
-    yaw = np.array([j.yaw for j in joints])
-    gamma = np.where(np.array([j.tilt for j in joints]) == 0, tilt_front, tilt_rear)
-    cz, sz = np.cos(0.5 * yaw), np.sin(0.5 * yaw)
-    cy, sy = np.cos(0.5 * gamma), np.sin(0.5 * gamma)
-    return np.column_stack([cz * cy, -sz * sy, cz * sy, sz * cy])
+    shape (4, 4): ``q_z(yaw) q_y(gamma)`` written out. Written into ``out`` when given
+    (the plant refills one buffer at every step)."""
+    out = np.empty((len(joints), 4)) if out is None else out
+    half = (0.5 * tilt_front, 0.5 * tilt_rear)
+    for i, joint in enumerate(joints):
+        cz, sz = math.cos(0.5 * joint.yaw), math.sin(0.5 * joint.yaw)
+        cy, sy = math.cos(half[joint.tilt]), math.sin(half[joint.tilt])
+        row = out[i]
+        row[0], row[1], row[2], row[3] = cz * cy, -sz * sy, cz * sy, sz * cy
+    return out
 
 
 def _numbers(values: tuple[float, ...] | list[float]) -> str:

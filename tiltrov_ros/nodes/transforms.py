@@ -63,7 +63,8 @@ except ImportError:         # the venv before (or without) make install's tf2_ms
 #: What the plant says, once, when it cannot publish the tree.
 NO_TF2_MSGS = ('tf2_msgs is not importable: no /tf and /tf_static (in the venv, `make '
                'install` builds it: docs/nodes.md, "The transform tree")')
-#: Numbers per transform in the values of the /tf template: translation, rotation x y z w.
+#: The values of the /tf template: odom -> base_link's translation and rotation (w, x, y,
+#: z), then each thruster link's rotation (w, x, y, z).
 _POSE = 7
 
 
@@ -101,20 +102,19 @@ class RobotTransforms:
             self.description = node.create_publisher(String, ROBOT_DESCRIPTION, LATCHED_QOS)
             self.description.publish(String(data=robot_urdf(robot)))
         self._values = np.zeros(_POSE + 4 * len(self._joints))
+        self._links = self._values[_POSE:].reshape(-1, 4)     # a view: refilled in place
         self._tilts: tuple[float, ...] = ()
         self._template = SerializedTemplate(TFMessage, self._message, self._stamps,
                                             len(self._values))
 
     def _message(self, values: np.ndarray, ns: int) -> Any:
-        """The /tf message of ``values`` (odom -> base_link, then the thruster links'
-        rotations x y z w), stamped ``ns``: the template's fill."""
-        x, y, z, qx, qy, qz, qw = values[:_POSE]
-        transforms = [transform(FRAME_EARTH_ENU, FRAME_BODY_FLU, ns, (x, y, z),
-                                (qw, qx, qy, qz))]
+        """The /tf message of ``values`` (:data:`_POSE`), stamped ``ns``: the template's
+        fill."""
+        transforms = [transform(FRAME_EARTH_ENU, FRAME_BODY_FLU, ns, values[0:3],
+                                values[3:_POSE])]
         for i, joint in enumerate(self._joints):
-            qx, qy, qz, qw = values[_POSE + 4 * i:_POSE + 4 * i + 4]
             transforms.append(transform(FRAME_BODY, joint.link, ns, joint.position,
-                                        (qw, qx, qy, qz)))
+                                        values[_POSE + 4 * i:_POSE + 4 * i + 4]))
         return TFMessage(transforms=transforms)
 
     @staticmethod
@@ -124,20 +124,22 @@ class RobotTransforms:
     def publish(self, sample: PlantSample) -> None:
         """The tree at ``sample`` (its stamp); nothing for a state not finite (its odom
         is withheld too)."""
+        if self.update(sample):
+            self.publisher.publish(self._template.serialize(sample.t_ns, self._values))
+
+    def update(self, sample: PlantSample) -> bool:
+        """The template's values at ``sample``; False if they are not all finite."""
         values = self._values
         try:
             p, q = pose_ned_to_enu(sample.position, sample.quaternion)
         except ValueError:      # a quaternion not finite: a diverged state
-            return
+            return False
         values[0:3] = p
-        values[3:6] = q[1:]
-        values[6] = q[0]
+        values[3:_POSE] = q
         if self._joints and sample.tilts != self._tilts:
             self._tilts = sample.tilts
-            q = link_quaternions(self._joints, *sample.tilts)
-            values[_POSE:] = q[:, [1, 2, 3, 0]].ravel()
-        if np.isfinite(values).all():
-            self.publisher.publish(self._template.serialize(sample.t_ns, values))
+            link_quaternions(self._joints, *sample.tilts, out=self._links)
+        return bool(np.isfinite(values).all())
 
 
 def robot_transforms(node: TiltrovNode, robot: RobotParams, ns: int, *, tf: bool,
