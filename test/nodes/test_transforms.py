@@ -189,3 +189,16 @@ def test_a_namespaced_stack_has_its_own_tree(ros: Any) -> None:
     assert sorted(by_child(*mine)) == sorted(REP105)
     assert root == []
     assert publishers == {'/tf': 0, '/tf_static': 0, '/r1/tf': 1, '/r1/tf_static': 1}
+
+
+def test_without_tf2_msgs_the_plant_runs_without_the_tree_and_says_so_once(
+        ros: Any, monkeypatch: pytest.MonkeyPatch, capfd: pytest.CaptureFixture[str]) -> None:
+    """A venv where tf2_msgs could not be built: the stack runs, with one line."""
+    import tiltrov_ros.nodes.transforms as transforms
+
+    monkeypatch.setattr(transforms, 'TFMessage', None)
+    plant = _plant(ros)
+    assert plant.transforms is None
+    assert ros.spin_until(lambda: plant.plant.time_ns >= NS // 10, timeout=60.0)
+    assert plant.count_publishers('/tf') == plant.count_publishers('/tf_static') == 0
+    assert capfd.readouterr().err.count('tf2_msgs is not importable') == 1
