@@ -32,7 +32,7 @@ from tf_tree import (
     tf_stamp,
 )
 
-from tiltrov_ros.core.names import FRAME_BODY, THRUSTER_LINKS
+from tiltrov_ros.core.names import FRAME_BODY, FRAME_BODY_FLU, THRUSTER_LINKS
 from tiltrov_ros.core.thrust_map import thruster_directions, thruster_positions
 from tiltrov_ros.nodes.conversions import stamp_ns
 from tiltrov_ros.nodes.plant_simulator import PlantSimulator
@@ -202,3 +202,15 @@ def test_without_tf2_msgs_the_plant_runs_without_the_tree_and_says_so_once(
     assert ros.spin_until(lambda: plant.plant.time_ns >= NS // 10, timeout=60.0)
     assert plant.count_publishers('/tf') == plant.count_publishers('/tf_static') == 0
     assert capfd.readouterr().err.count('tf2_msgs is not importable') == 1
+
+
+@pytest.mark.slow
+def test_with_robot_state_publisher_the_plant_leaves_it_the_thruster_links(ros: Any) -> None:
+    """``tf_thrusters: false`` (ros2 launch where robot_state_publisher runs): /tf carries
+    odom -> base_link alone, and the plant publishes no robot_description."""
+    plant = _plant(ros, tf_thrusters=False)
+    tf: list[Any] = []
+    ros.node('tf_reader').create_subscription(TFMessage, '/tf', tf.append, 100)
+    assert ros.spin_until(lambda: len(tf) >= 5, timeout=60.0)
+    assert {tuple(t.child_frame_id for t in m.transforms) for m in tf} == {(FRAME_BODY_FLU,)}
+    assert plant.count_publishers('robot_description') == 0
