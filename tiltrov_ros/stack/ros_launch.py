@@ -153,14 +153,17 @@ def robot_state_publisher_installed() -> bool:
     return True
 
 
+def robot_state_publisher_parameters(config: StackConfig) -> dict[str, Any]:
+    """The URDF of the robot in use, sim time, and the thruster links at every
+    ``joint_states`` (the plant step: the odometry's rate; its default is 20 Hz)."""
+    return {'robot_description': robot_urdf(config.robot), 'use_sim_time': True,
+            'publish_frequency': NS_PER_S / config.step_ns}
+
+
 def _robot_state_publisher(config: StackConfig, namespace: str) -> Node:
-    """robot_state_publisher with the URDF of the robot in use, on sim time, publishing the
-    thruster links at every ``joint_states`` (the plant step: the odometry's rate)."""
     return Node(package=ROBOT_STATE_PUBLISHER, executable=ROBOT_STATE_PUBLISHER,
                 namespace=namespace or None, output='screen',
-                parameters=[{'robot_description': robot_urdf(config.robot),
-                             'use_sim_time': True,
-                             'publish_frequency': NS_PER_S / config.step_ns}],
+                parameters=[robot_state_publisher_parameters(config)],
                 remappings=list(TF_REMAPPINGS) if namespace else None)
 
 
