@@ -1,6 +1,7 @@
 """Test harness shared by the whole suite.
 
-* DDS isolation: one random ``ROS_DOMAIN_ID`` per test session and
+* DDS isolation: one ``ROS_DOMAIN_ID`` per test session that no other session on
+  the machine holds (a lock per domain, :func:`domains.claim_domain`) and
   ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``, set before rclpy is imported
   anywhere, so two test runs on one machine (CI and a developer) never hear
   each other. Subprocesses started by tests inherit both.
@@ -19,17 +20,17 @@ from __future__ import annotations
 from collections.abc import Callable, Iterator
 import os
 from pathlib import Path
-import random
 import time
 from typing import Any
 
+from domains import claim_domain
 from hypothesis import settings
 import pytest
 
 if 'TILTROV_TEST_DOMAIN_ID' not in os.environ:
-    # 1..101: valid on every platform with the default port mapping; 0 (the
-    # default domain) is left to interactive ROS users.
-    os.environ['TILTROV_TEST_DOMAIN_ID'] = str(random.SystemRandom().randint(1, 101))
+    # A nested session (a test that runs pytest or colcon test) inherits its parent's.
+    _domain, _domain_lock = claim_domain()      # the lock is held open for the session
+    os.environ['TILTROV_TEST_DOMAIN_ID'] = str(_domain)
 os.environ['ROS_DOMAIN_ID'] = os.environ['TILTROV_TEST_DOMAIN_ID']
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.pop('ROS_STATIC_PEERS', None)

@@ -77,9 +77,14 @@ class Probe:
     def __init__(self, node: Any, topics: Sequence[str]) -> None:
         self.node = node
         self.messages: dict[str, list[Any]] = {topic: [] for topic in topics}
-        for topic in topics:
+        self.subscriptions = [
             node.create_subscription(TOPIC_TYPES[topic], topic, self.messages[topic].append,
-                                     KEEP_ALL)
+                                     KEEP_ALL) for topic in topics]
+
+    def matched(self) -> bool:
+        """Every reader of the probe is matched with a writer (it gets what is published
+        from now on)."""
+        return all(sub.get_publisher_count() > 0 for sub in self.subscriptions)
 
     def __getitem__(self, topic: str) -> list[Any]:
         return self.messages[topic]

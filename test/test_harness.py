@@ -88,3 +88,21 @@ def test_each_test_gets_its_own_context(ros) -> None:
     node = ros.node('probe')
     assert node.context is ros.context
     assert ros.context.ok()
+
+
+def test_no_two_sessions_on_the_machine_take_the_same_domain() -> None:
+    """Each session holds a lock on its domain for its whole life: a second claim (as a
+    test session started meanwhile makes it) gets another one, and this session's own
+    lock stays held while the other is taken and released."""
+    from domains import claim_domain
+    own = int(os.environ['ROS_DOMAIN_ID'])
+    claims = [claim_domain() for _ in range(3)]
+    try:
+        domains = [d for d, _ in claims]
+        assert own not in domains and len(set(domains)) == 3
+    finally:
+        for _, handle in claims:
+            handle.close()
+    again, handle = claim_domain()
+    handle.close()
+    assert again != own

@@ -176,9 +176,9 @@ def test_replayed_wrench_cmd_drives_the_allocator_like_the_live_stack(
                                  stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     player = None
     try:
-        assert ros.spin_until(lambda: all(probe_node.count_publishers(t) for t in probe.messages),
-                              timeout=60.0), 'the allocator did not come up'
-        ros.spin_for(0.5)               # let the probe's readers match too
+        # The probe's readers matched with the allocator's writers, not only discovered
+        # (a fixed half second was too short under load: the first answers went by).
+        assert ros.spin_until(probe.matched, timeout=60.0), 'the allocator did not come up'
         player = subprocess.Popen(
             [sys.executable, '-m', 'tiltrov_ros.cli', 'replay', str(bag), '--topics',
              'wrench_cmd', '--by-stamp', '--wait-for-subscribers', '30'],

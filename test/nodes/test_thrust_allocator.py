@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import replace
 import math
 from pathlib import Path
+from typing import Any
 
 from geometry_msgs.msg import WrenchStamped
 import numpy as np
@@ -27,6 +28,7 @@ from sensor_msgs.msg import JointState
 
 from tiltrov_ros.core.allocation import load_allocator_config
 from tiltrov_ros.core.errors import ParameterError
+from tiltrov_ros.core.names import FAILSAFE_FRAME
 from tiltrov_ros.core.params import load_robot_params
 from tiltrov_ros.nodes.conversions import stamp_ns
 from tiltrov_ros.nodes.thrust_allocator import ThrustAllocatorNode
@@ -54,9 +56,15 @@ def _core(**changes):
     return replace(load_allocator_config(), **changes).build(load_robot_params(), 0.05)
 
 
+def _answers(probe: Probe, topic: str) -> list[Any]:
+    """The answers to wrench_cmd the probe received on ``topic``: not the failsafe's
+    (zero thrust while wrench_cmd is stale, marked and with no wrench_achieved)."""
+    return [m for m in probe[topic] if m.header.frame_id != FAILSAFE_FRAME]
+
+
 def _answered(probe: Probe, n: int):
-    return lambda: all(len(probe[t]) == n for t in ('thrust_cmd', 'tilt_cmd',
-                                                     'wrench_achieved'))
+    return lambda: all(len(_answers(probe, t)) == n for t in ('thrust_cmd', 'tilt_cmd',
+                                                               'wrench_achieved'))
 
 
 def test_answers_stamped_with_the_wrench_and_allocated_from_previous(rig) -> None:
@@ -332,7 +340,12 @@ def test_wrench_watchdog_zero_thrust_when_stale_and_recovery(ros) -> None:
                           and len(probe['tilt_cmd']) > 1)
     zero, tilts = probe['thrust_cmd'][-1], probe['tilt_cmd'][-1]
     assert list(zero.effort) == [0.0] * 4 and list(tilts.position) == held
-    assert stamp_ns(zero.header.stamp) > T0
+    # The safety command answers no wrench_cmd: stamped after the last one, off the
+    # control-tick grid, and marked.
+    stamp = stamp_ns(zero.header.stamp)
+    assert stamp > T0 and stamp % TICK != 0 and stamp_ns(tilts.header.stamp) == stamp
+    assert zero.header.frame_id == tilts.header.frame_id == FAILSAFE_FRAME
+    assert probe['thrust_cmd'][0].header.frame_id == ''      # an answer is not marked
     values = report(ros, probe, allocator)
     assert values['wrench_stale'] == 'True' and 'wrench_cmd stale' in values['_message']
     pubs['wrench_cmd'].publish(wrench(T0 + 300 * MS, W2))
@@ -412,12 +425,15 @@ def test_wait_for_recorder_holds_the_answers_until_the_recorder_reads_every_topi
     recorder.create_subscription(WrenchStamped, 'wrench_achieved', lambda m: None, KEEP_ALL)
     assert ros.spin_until(_answered(probe, 2))
     for topic in ('thrust_cmd', 'tilt_cmd', 'wrench_achieved'):
-        assert probe.stamps(topic) == [0, TICK]
+        assert [stamp_ns(m.header.stamp) for m in _answers(probe, topic)] == [0, TICK]
     core = _core()
     r1 = core.allocate(np.array(W1))
     np.testing.assert_array_equal(effort_rows(probe['thrust_cmd'])[0], r1.thrusts)
     pub.publish(wrench(2 * TICK, W1))                # no longer held
     assert ros.spin_until(_answered(probe, 3))
+    # The wrench of 2 * TICK is answered (a failsafe may come first: a second passed).
+    assert [stamp_ns(m.header.stamp) for m in _answers(probe, 'thrust_cmd')] == [
+        0, TICK, 2 * TICK]
 
 
 def test_measured_tilts_from_joint_states_are_the_starting_point(rig) -> None:

@@ -115,7 +115,13 @@ def losses(bag: str | Path) -> Losses:
     counts = message_counts(bag, last)
     found.topics = {t: c['published'] - c['recorded'] for t, c in counts.items()
                     if c['published'] > c['recorded']}
-    found.unfinished = sorted(node for node, values in last.items()
-                              if any(k.startswith('published.') for k in values)
-                              and values.get(FINAL_STATUS_KEY) != 'true')
+    # The launcher names the nodes of the run; a node none of whose reports reached the
+    # bag (the recorder stopped from the start) has no final report either.
+    expected = info.run_info.get('nodes')
+    reporting = {node for node, values in last.items()
+                 if any(k.startswith('published.') for k in values)}
+    if isinstance(expected, list):
+        reporting |= {str(node) for node in expected}
+    found.unfinished = sorted(node for node in reporting
+                              if last.get(node, {}).get(FINAL_STATUS_KEY) != 'true')
     return found

@@ -164,6 +164,7 @@ def kernel(*signatures: str, group: str = '') -> Callable[[F], F]:
             return fn
         import numba
         dispatcher: Any = numba.njit(cache=True, nogil=True, error_model='numpy')(fn)
+        _plain_types_from_kernels(dispatcher)
         if signatures:
             _STATE.kernels.append(Registered(group, f'{fn.__module__}.{fn.__qualname__}',
                                              dispatcher, tuple(signatures)))
@@ -171,6 +172,26 @@ def kernel(*signatures: str, group: str = '') -> Callable[[F], F]:
         return out
 
     return decorate
+
+
+def _plain_types_from_kernels(dispatcher: Any) -> None:
+    """Compile a kernel called from another kernel for its arguments' plain types.
+
+    numba types a constant argument as a literal (``Literal[int](3)``,
+    ``Literal[bool](True)``) and compiles the callee once more for every such
+    constant (and for a counter's initial value met during type inference):
+    that more than doubled the allocation kernels' cold compile. The literal
+    still converts to the plain type the kernel is compiled for.
+    """
+    from numba.core import types
+
+    template = dispatcher.get_call_template
+    plain: Callable[[Any], Any] = types.unliteral
+
+    def get_call_template(args: tuple[Any, ...], kws: dict[str, Any]) -> Any:
+        return template(tuple(plain(a) for a in args), {k: plain(v) for k, v in kws.items()})
+
+    dispatcher.get_call_template = get_call_template
 
 
 def registered(groups: Iterable[str] | None = None) -> list[Registered]:

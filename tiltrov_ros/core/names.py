@@ -23,6 +23,10 @@ FRAME_BODY_FLU = 'base_link'
 #: The thrusters' links of the URDF (children of base_link_frd through the tilt joints;
 #: x along the thrust): thruster_1_link .. thruster_4_link.
 THRUSTER_LINKS = tuple(f'thruster_{i}_link' for i in range(1, 5))
+#: ``header.frame_id`` of a safety command that answers no wrench_cmd: the allocator's
+#: zero thrust (tilts held) while wrench_cmd is stale. Such a command is also stamped
+#: off the control-tick grid (ARCHITECTURE.md, "Time and stamps").
+FAILSAFE_FRAME = 'failsafe'
 
 # --------------------------------------------------------------------------- joints
 
@@ -99,6 +103,8 @@ REFERENCE = 'reference_publisher'
 RECORDER = 'bag_recorder'
 #: Every node of the package (a parameter file section naming none of them is reported).
 NODES = (PLANT, CONTROLLER, ALLOCATOR, REFERENCE, RECORDER)
+#: The stack's nodes: each reports what it published on /diagnostics, finally as it stops.
+STACK_NODES = (PLANT, CONTROLLER, ALLOCATOR, REFERENCE)
 
 # --------------------------------------------------------------------------- modes
 

@@ -43,6 +43,7 @@ from tiltrov_ros.core.allocation import (
 from tiltrov_ros.core.errors import ParameterError
 from tiltrov_ros.core.names import (
     ALLOCATOR,
+    FAILSAFE_FRAME,
     FRAME_BODY,
     JOINT_STATES,
     THRUST_CMD,
@@ -454,7 +455,13 @@ class ThrustAllocatorNode(TiltRequests, TiltrovNode):
         if seen is None:
             return
         self.watchdog_outputs += 1
-        self._publish(*self._safe_msgs(self.estimated_now_ns(*seen, to_ns(self.control_period))))
+        _, tilt, thrust = self._safe_msgs(
+            self.estimated_now_ns(*seen, to_ns(self.control_period)))
+        # It answers no wrench_cmd: marked (its stamp, off the tick grid, may still meet
+        # the controller's own safety wrench), and no wrench_achieved goes with it.
+        tilt.header.frame_id = thrust.header.frame_id = FAILSAFE_FRAME
+        self._tilt_pub.publish(tilt)
+        self._thrust_pub.publish(thrust)
 
     def on_rejected(self, topic: str, bad: InvalidInput, stamp: int | None) -> None:
         """A rejected wrench with a valid stamp, later than the last answered and not

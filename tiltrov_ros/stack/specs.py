@@ -27,6 +27,8 @@ from tiltrov_ros.core.names import (
     RECORDER,
     REFERENCE,
     TF_REMAPPINGS,
+    STACK_NODES,
+    join_namespace,
     normalize_namespace,
 )
 from tiltrov_ros.core.runner import StackConfig, stack_config
@@ -220,8 +222,12 @@ def stack_specs(options: LaunchOptions, *, config_dir: Path | None = None,
 def run_info(options: LaunchOptions, config: StackConfig, duration: float) -> dict[str, Any]:
     """What the recorder stores about the run (bag metadata)."""
     info = config.describe()
+    namespace = normalize_namespace(options.namespace)
+    # The nodes whose final report the bag must hold (bag/losses.py): one that never
+    # reached the bag at all is missing too.
     info.update(duration=duration, mode=LOCKSTEP if options.lockstep else REALTIME,
-                namespace=normalize_namespace(options.namespace), launcher=options.launcher)
+                namespace=namespace, launcher=options.launcher,
+                nodes=[join_namespace(namespace, n) for n in STACK_NODES])
     if not options.lockstep:
         info['real_time_factor'] = options.real_time_factor
     return info

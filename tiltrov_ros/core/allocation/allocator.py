@@ -12,7 +12,11 @@ allocator built on it (``mode='robust'``, the default):
 * :mod:`.thrusts`, :mod:`.local`, :mod:`.optimum`: the thrusts at given tilts and
   the per-tick optimum over the tilts within reach;
 * :mod:`.planner`, :mod:`.robust`: the robust mode's answer when no exact
-  solution is within reach, servo travel planned over a receding horizon.
+  solution is within reach, servo travel planned over a receding horizon;
+* :mod:`.compiled`, :mod:`.kernels`: all of the above as numba kernels, one
+  kernel call per ``allocate``; which one answers is chosen per allocator
+  (``backend``, default the process's :func:`tiltrov_ros.core.jit.backend`).
+  The modules above stay the reference that tests pin the kernels to.
 
 Errors in the printed formulas (each checked by a test in
 ``test/core/test_allocation.py``):
@@ -46,7 +50,9 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
+from tiltrov_ros.core import jit
 from tiltrov_ros.core.allocation.closed_form import candidates
+from tiltrov_ros.core.allocation.compiled import Compiled
 from tiltrov_ros.core.allocation.decomposition import HALF_PI, FloatArray, Geometry
 from tiltrov_ros.core.allocation.families import symmetric_family
 from tiltrov_ros.core.allocation.limits import Limits
@@ -71,6 +77,7 @@ from tiltrov_ros.core.errors import AllocationError
 from tiltrov_ros.core.thrust_map import thrust_wrench
 
 Mode = Literal['paper', 'robust']
+Backend = Literal['numba', 'numpy']
 
 #: Default per-DOF weights (X, Y, Z, K, M, N) of the wrench error in robust mode:
 #: depth and attitude (yaw included) first.
@@ -108,6 +115,9 @@ class ThrustAllocator:
     planning : robust mode: plan the servos' travel when the best configuration
         is out of reach (:mod:`.planner`); False: the per-tick optimum only
     horizon : planning horizon in calls (default: two 180 deg servo travels)
+    backend : ``'numba'`` (the compiled kernels of :mod:`.kernels`), ``'numpy'``
+        (this package's reference implementation) or None: the process's
+        (:func:`tiltrov_ros.core.jit.backend`, ``TILTROV_BACKEND``). Same answers.
     """
 
     def __init__(self, length: float, width: float, max_thrust: float = 40.0,
@@ -116,7 +126,8 @@ class ThrustAllocator:
                  weights: Sequence[float] | None = None,
                  failed_thrusters: Collection[int] = (),
                  motion_penalty: float = DEFAULT_MOTION_PENALTY,
-                 planning: bool = True, horizon: int | None = None) -> None:
+                 planning: bool = True, horizon: int | None = None,
+                 backend: Backend | None = None) -> None:
         if not (math.isfinite(length) and length > 0):
             raise AllocationError(f'length must be a finite number > 0 m, got {length}')
         if not (math.isfinite(width) and width > 0):
@@ -147,6 +158,13 @@ class ThrustAllocator:
                        if math.isfinite(max_tilt_step) else 1)
         if isinstance(horizon, bool) or not isinstance(horizon, int) or horizon < 1:
             raise AllocationError(f'horizon must be an integer >= 1, got {horizon!r}')
+        if backend is None:
+            backend = 'numba' if jit.compiled() else 'numpy'
+        if backend not in ('numba', 'numpy'):
+            raise AllocationError(f"backend must be None, 'numba' or 'numpy', got {backend!r}")
+        if backend == 'numba' and not jit.compiled():
+            raise AllocationError("backend='numba' needs the compiled kernels, but this process "
+                                  f"runs the numpy reference ({jit.describe()['reason']})")
         self.length = float(length)
         self.width = float(width)
         self.max_thrust = float(max_thrust)
@@ -164,6 +182,10 @@ class ThrustAllocator:
         self.limits = Limits(self.geometry, self.max_thrust, lo, hi, self.max_tilt_step, w,
                              available, mode)
         self._options = Options(self.motion_penalty, self.planning, horizon)
+        #: ``'numba'`` or ``'numpy'``: which implementation answers.
+        self.backend: Backend = backend
+        self._compiled = (Compiled(self.limits, self.motion_penalty, self.planning, horizon)
+                          if backend == 'numba' else None)
 
     def __repr__(self) -> str:
         return (f'ThrustAllocator(length={self.length}, width={self.width}, '
@@ -186,6 +208,8 @@ class ThrustAllocator:
         most ``max_tilt_step``. Non-finite wrench components are read as 0 and
         the result is then never ``feasible``.
         """
+        if self._compiled is not None:
+            return self._compiled.allocate(self._wrench_array(wrench), previous)
         tau, finite = self._check_wrench(wrench)
         prev = self._previous_tilts(previous)
         limits = self.limits
@@ -231,6 +255,10 @@ class ThrustAllocator:
         The tilts are clipped to the range and to ``max_tilt_step`` from
         ``previous``; a non-finite requested tilt keeps the previous one.
         """
+        if self._compiled is not None:
+            request = np.array([tilt_front, tilt_rear], dtype=float)
+            return self._compiled.allocate_fixed(self._wrench_array(wrench), float(request[0]),
+                                                 float(request[1]), previous)
         tau, finite = self._check_wrench(wrench)
         prev = self._previous_tilts(previous)
         box = self.limits.box(prev)
@@ -243,6 +271,12 @@ class ThrustAllocator:
 
     def thrusts_at(self, wrench: ArrayLike, tilts: ArrayLike) -> FloatArray:
         """(4,) thrusts [N] with the least weighted error at the given (2,) tilts."""
+        if self._compiled is not None:
+            tau = np.array(wrench, dtype=float).ravel()
+            t = np.asarray(tilts, dtype=float).ravel()
+            finite = bool(np.all(np.isfinite(tau)) and np.all(np.isfinite(t)))
+            if tau.shape == (6,) and t.shape == (2,) and finite:
+                return self._compiled.thrusts_at(tau, float(t[0]), float(t[1]))
         problem = TiltProblem(self.geometry, wrench, self.max_thrust, self.weights,
                               self.limits.available)
         t = np.asarray(tilts, dtype=float)
@@ -258,20 +292,23 @@ class ThrustAllocator:
         exact solution go one by one through :meth:`allocate`'s fallback (the
         paper's, or the robust optimiser). ``previous_tilts``: (n, 2) or None.
         """
-        taus = np.array(wrenches, dtype=float)
+        taus = np.array(wrenches, dtype=float, order='C')
         if taus.ndim != 2 or taus.shape[1] != 6:
             raise AllocationError(f'wrenches must have shape (n, 6), got {taus.shape}')
         n = len(taus)
+        given: FloatArray | None = None
+        if previous_tilts is not None:
+            given = np.array(previous_tilts, dtype=float, order='C')
+            if given.shape != (n, 2):
+                raise AllocationError(
+                    f'previous_tilts must have shape ({n}, 2), got {given.shape}')
+        if self._compiled is not None:
+            return self._compiled.allocate_batch(taus, given)
         finite = np.all(np.isfinite(taus), axis=1)
         taus = np.where(np.isfinite(taus), taus, 0.0)
         prev: FloatArray | None = None
-        if previous_tilts is not None:
-            prev = np.array(previous_tilts, dtype=float)
-            if prev.shape != (n, 2):
-                raise AllocationError(
-                    f'previous_tilts must have shape ({n}, 2), got {prev.shape}')
-            prev = np.where(np.isfinite(prev), prev, 0.0)
-            prev = np.clip(prev, *self.tilt_limits)
+        if given is not None:
+            prev = np.clip(np.where(np.isfinite(given), given, 0.0), *self.tilt_limits)
         thrusts = np.zeros((n, 4))
         tilts = np.zeros((n, 2))
         todo = np.ones(n, dtype=bool)
@@ -303,13 +340,19 @@ class ThrustAllocator:
     # ------------------------------------------------------------------ boundaries
 
     @staticmethod
-    def _check_wrench(wrench: ArrayLike) -> tuple[FloatArray, bool]:
+    def _wrench_array(wrench: ArrayLike) -> FloatArray:
+        """A fresh (6,) float array of ``wrench``, or one clear error."""
         try:
             tau = np.array(wrench, dtype=float)
         except (TypeError, ValueError) as exc:
             raise AllocationError(f'wrench must be 6 numbers, got {wrench!r}') from exc
         if tau.shape != (6,):
             raise AllocationError(f'wrench must have shape (6,), got {tau.shape}')
+        return tau
+
+    @classmethod
+    def _check_wrench(cls, wrench: ArrayLike) -> tuple[FloatArray, bool]:
+        tau = cls._wrench_array(wrench)
         finite = bool(np.all(np.isfinite(tau)))
         return (tau if finite else np.where(np.isfinite(tau), tau, 0.0)), finite
 

@@ -11,7 +11,9 @@ thrust map is singular (both pairs level, both vertical). The search:
 2. the best few local minima of the upper bound (at most :data:`SEEDS`, in
    distinct cells) and the starts are refined by a projected Newton method on
    the exact c with its analytic gradient and Hessian (:mod:`.local`), with
-   backtracking;
+   backtracking; a point that starts where an earlier one did (a start on a
+   grid point, exact solutions clipped to the same corner of the box) is
+   refined once;
 3. the best refined point wins.
 
 c is pi-periodic in each tilt (a tilt and its twin pi away are the same
@@ -94,6 +96,11 @@ class Search:
         self.evaluations += 1
         return evaluate(self.problem, a, b, hint)
 
+    def clip(self, a: float, b: float) -> tuple[float, float]:
+        """(a, b) within the limits: where :meth:`refine` starts."""
+        (alo, ahi), (blo, bhi) = self.limits
+        return min(max(a, alo), ahi), min(max(b, blo), bhi)
+
     def refine(self, a: float, b: float, radius: float = 0.1) -> Evaluation:
         """Trust-region Newton from (a, b) within the box.
 
@@ -108,7 +115,7 @@ class Search:
         """
         (alo, ahi), (blo, bhi) = self.limits
         eps = min(1e-3, 0.1 * (ahi - alo), 0.1 * (bhi - blo))
-        a, b = min(max(a, alo), ahi), min(max(b, blo), bhi)
+        a, b = self.clip(a, b)
         e = self._eval(a, b)
         best = self.value(e)
         mu2 = self.mu2
@@ -160,7 +167,16 @@ class Search:
                   for i in _best_cells(upper, (len(ga), len(gb)), seeds)]
         points += [(float(s[0]), float(s[1])) for s in starts if np.all(np.isfinite(s))]
         best: Evaluation | None = None
+        refined: set[tuple[float, float, float, float]] = set()
         for a, b in points:
+            # A point that starts where one before did (a start on a grid point, two
+            # exact solutions clipped to the same corner) repeats its refinement and
+            # cannot beat it: skipped. Signs of zeros count (atan2 tells them apart).
+            ca, cb = self.clip(a, b)
+            key = (ca, cb, math.copysign(1.0, ca), math.copysign(1.0, cb))
+            if key in refined:
+                continue
+            refined.add(key)
             e = self.refine(a, b)
             if best is None or self.value(e) < self.value(best):
                 best = e
