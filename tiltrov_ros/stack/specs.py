@@ -26,8 +26,8 @@ from tiltrov_ros.core.names import (
     REALTIME,
     RECORDER,
     REFERENCE,
-    TF_REMAPPINGS,
     STACK_NODES,
+    TF_REMAPPINGS,
     join_namespace,
     normalize_namespace,
 )
