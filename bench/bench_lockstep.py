@@ -175,7 +175,11 @@ def latency(seconds_of_sim: float, real_time_factor: float,
     return {'samples': float(samples.size), 'median_ms': float(np.median(samples)),
             'p99_ms': float(np.percentile(samples, 99)), 'max_ms': float(samples.max()),
             'controller_median_ms': float(np.median(controller)) if controller else math.nan,
-            'allocator_median_ms': float(np.median(allocator)) if allocator else math.nan}
+            'allocator_median_ms': float(np.median(allocator)) if allocator else math.nan,
+            'controller_p99_ms': (float(np.percentile(controller, 99)) if controller
+                                  else math.nan),
+            'allocator_p99_ms': (float(np.percentile(allocator, 99)) if allocator
+                                 else math.nan)}
 
 
 def main(argv: list[str] | None = None) -> dict[str, float]:

@@ -290,12 +290,12 @@ class LaunchProcess:
     """``tiltrov launch`` as a process: its output (read by a thread, so the pipe never
     fills) and its ``--status-file`` (the pids of the nodes it started, its state)."""
 
-    def __init__(self, tmp_path: Path, *args: str) -> None:
+    def __init__(self, tmp_path: Path, *args: str, env: dict[str, str] | None = None) -> None:
         self.status_path = tmp_path / 'launch_status.json'
         self.process = subprocess.Popen(
             [sys.executable, '-m', 'tiltrov_ros.cli', 'launch', *args, '--status-file',
              str(self.status_path)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-            text=True, cwd=tmp_path)
+            text=True, cwd=tmp_path, env=None if env is None else {**os.environ, **env})
         self.lines: list[str] = []
         self._reader = threading.Thread(
             target=lambda: self.lines.extend(self.process.stdout or ()), daemon=True)

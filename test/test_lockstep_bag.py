@@ -26,6 +26,7 @@ from tiltrov_ros.analysis.reallocate import compare, read_control
 from tiltrov_ros.bag.bagfile import iter_raw
 from tiltrov_ros.bag.cdr import leading_stamp_ns
 from tiltrov_ros.bag.reader import read_runlog
+from tiltrov_ros.core import jit
 from tiltrov_ros.core.metrics import metric_differences
 from tiltrov_ros.core.names import ALLOCATOR
 from tiltrov_ros.core.timebase import to_ns
@@ -69,7 +70,7 @@ def test_analyze_of_a_lockstep_bag_gives_the_metrics_of_tiltrov_sim(
     simulated = json.loads((tmp_path / 'sim' / 'metrics.json').read_text())
     assert analyzed['ticks'] == 100 and analyzed['unmatched_ticks'] == 0
     assert analyzed['run'] == {'scenario': SCENARIO, 'controller': controller,
-                               'allocator_mode': 'robust'}
+                               'allocator_mode': 'robust', 'backend': jit.backend()}
     assert metric_differences(analyzed, simulated) == []
     # Nothing was missing from the bag: every value came from a message; and every
     # message DDS delivered was read by its CDR layout, none needed rosbags' decoder.

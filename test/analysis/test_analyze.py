@@ -18,6 +18,7 @@ from tiltrov_ros import cli
 from tiltrov_ros.analysis.analyze import analyze, bag_names, run_labels, unique_names
 from tiltrov_ros.bag.export import write_runlog_bag
 from tiltrov_ros.bag.writer import BagWriter
+from tiltrov_ros.core import jit
 from tiltrov_ros.core.metrics import compute_metrics
 from tiltrov_ros.core.runlog import CONTROL_FIELDS, PLANT_FIELDS, RunLog
 from tiltrov_ros.core.runner import run_scenario, stack_config
@@ -49,7 +50,7 @@ def test_one_bag_gives_the_metrics_files_and_figures_of_its_run(
     metrics = json.loads((out / 'metrics.json').read_text())
     assert metrics == as_json(compute_metrics(log))
     assert metrics['run'] == {'scenario': 'pitch_hold', 'controller': 'pd',
-                              'allocator_mode': 'robust'}
+                              'allocator_mode': 'robust', 'backend': jit.backend()}
     for name in ('run.npz', 'control.csv', 'errors.png', 'tilts.png', 'tracking.png',
                  'overlay.png', 'wrench_pd.png'):
         assert (out / name).stat().st_size > 0, name
@@ -112,7 +113,8 @@ def test_bag_without_run_info_is_analyzed_with_the_shipped_thrust_limit(
         "config/robot.yaml's 40 N"]
     metrics = json.loads((tmp_path / 'out' / 'metrics.json').read_text())
     expected = as_json(compute_metrics(log))
-    assert metrics['run'] == {'scenario': None, 'controller': None, 'allocator_mode': None}
+    assert metrics['run'] == {'scenario': None, 'controller': None, 'allocator_mode': None,
+                              'backend': None}
     assert {k: v for k, v in metrics.items() if k != 'run'} == {
         k: v for k, v in expected.items() if k != 'run'}
 

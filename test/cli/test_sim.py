@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from tiltrov_ros.cli import main
+from tiltrov_ros.core import jit
 from tiltrov_ros.core.metrics import compute_metrics
 from tiltrov_ros.core.runlog import RunLog
 
@@ -32,7 +33,7 @@ def test_one_run_writes_data_metrics_and_figures(tmp_path: Path,
     metrics = json.loads((out / 'metrics.json').read_text())
     assert INTERFACE_KEYS <= set(metrics)
     assert metrics['run'] == {'scenario': 'pitch_hold', 'controller': 'pid',
-                              'allocator_mode': 'robust'}
+                              'allocator_mode': 'robust', 'backend': jit.backend()}
     # The saved RunLog gives the same metrics (what tiltrov analyze will recompute).
     log = RunLog.load_npz(out / 'run.npz')
     assert log.t[-1] == 2.0 and len(log.tc) == 40
@@ -58,7 +59,7 @@ def test_compare_overlays_several_controllers(tmp_path: Path) -> None:
     for kind in ('pd', 'switching'):
         metrics = json.loads((out / kind / 'metrics.json').read_text())
         assert metrics['run'] == {'scenario': 'trajectory', 'controller': kind,
-                                  'allocator_mode': 'paper'}
+                                  'allocator_mode': 'paper', 'backend': jit.backend()}
         assert (out / kind / 'run.npz').is_file() and (out / kind / 'control.csv').is_file()
     assert not list(out.glob('*.png'))
 

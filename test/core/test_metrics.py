@@ -199,7 +199,8 @@ def test_interfaces_keys_and_json(tmp_path: Path) -> None:
     assert list(m['max_tilt_rate']) == ['front', 'rear']
     assert isinstance(m['thrust_saturation_fraction'], float)
     assert isinstance(m['wrench_error_rms'], float)
-    assert m['run'] == {'scenario': 'synthetic', 'controller': 'pd', 'allocator_mode': 'robust'}
+    assert m['run'] == {'scenario': 'synthetic', 'controller': 'pd', 'allocator_mode': 'robust',
+                        'backend': None}
     assert json.loads(write_metrics(m, tmp_path / 'm.json').read_text()) == m
 
 

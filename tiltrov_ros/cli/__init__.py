@@ -36,6 +36,8 @@ COMMANDS: dict[str, Command] = {
                                'against baselines measured in the same run)'),
     'soak': Command('.soak', 'one hour of simulated time in lockstep, recorded: RSS of each '
                              'process, messages published vs recorded, stalls'),
+    'warmup': Command('.warmup', 'compile (or load) the compiled kernels ahead of use; time '
+                                 'per group and the cache directory'),
     'campaign': Command('.campaign', 'Monte-Carlo runs of a campaign file on Dask: hold '
                                          'rate per configuration, table, figures'),
 }

@@ -19,6 +19,12 @@ Tilt servos (:class:`TiltServos`)
     rate at which the servo arrived at its current angle (zero initially); it
     never exceeds the rate limit.
 
+State arrays
+    Each model keeps its state in one small float64 array (``state``, the
+    layout below) so that the plant's compiled step
+    (:mod:`tiltrov_ros.core.plant_kernels`) updates it in place; the methods
+    here are the reference it is tested against.
+
 Non-finite commands
     A command with any NaN or infinite element is rejected as a whole (the
     thrust vector and the tilt pair are rejected separately, as they arrive in
@@ -41,6 +47,23 @@ from tiltrov_ros.core.errors import ParameterError
 from tiltrov_ros.core.params import RobotParams
 
 FloatArray = NDArray[np.float64]
+
+
+# ThrusterBank.state: float64[THRUSTER_STATE]
+THRUST = 0               # 4 entries: actual thrusts [N]
+THRUST_CMD = 4           # 4 entries: the command in force (saturated) [N]
+THRUST_WORKING = 8       # 4 entries: 1.0 working, 0.0 failed
+THRUSTER_STATE = 12
+# TiltServos.state: float64[SERVO_STATE]
+TILT = 0                 # 2 entries: actual (tilt_front, tilt_rear) [rad]
+TILT_VELOCITY = 2        # 2 entries: backward differences [rad/s]
+TILT_CMD = 4             # 2 entries: the command in force (clipped) [rad]
+SERVO_STATE = 6
+
+
+def thruster_decay(time_constant: float, h: float) -> float:
+    """exp(-h / T): the first-order lag over one step of h s (0 for an ideal thruster)."""
+    return math.exp(-h / time_constant) if time_constant > 0 else 0.0
 
 
 def _as_floats(values: ArrayLike, n: int, what: str) -> list[float]:
@@ -81,8 +104,12 @@ class ThrusterBank:
             raise ParameterError('initial thrusts',
                                  f'got {start!r}; allowed: 4 finite values in '
                                  f'[-{self.max_thrust:g}, {self.max_thrust:g}] N')
-        self._thrusts = start
-        self._command = list(start)
+        #: thrusts, command and working flags (layout: ``THRUST``, ``THRUST_CMD``,
+        #: ``THRUST_WORKING``), updated in place.
+        self.state = np.zeros(THRUSTER_STATE)
+        self.state[THRUST:THRUST + 4] = start
+        self.state[THRUST_CMD:THRUST_CMD + 4] = start
+        self.state[THRUST_WORKING:THRUST_WORKING + 4] = 1.0
         self.rejected = 0
         #: Indices 0..3 of failed thrusters: they ignore their command and spin down
         #: to zero thrust with the time constant.
@@ -98,12 +125,12 @@ class ThrusterBank:
     @property
     def thrusts(self) -> tuple[float, ...]:
         """Actual thrusts of thruster_1..4, N."""
-        return tuple(self._thrusts)
+        return tuple(self.state[THRUST:THRUST + 4].tolist())
 
     @property
     def command_held(self) -> tuple[float, ...]:
         """The command in force (after saturation), N."""
-        return tuple(self._command)
+        return tuple(self.state[THRUST_CMD:THRUST_CMD + 4].tolist())
 
     def command(self, thrusts: ArrayLike) -> bool:
         """Hold a new command (4 thrusts, N); saturated to the limit.
@@ -115,7 +142,7 @@ class ThrusterBank:
             self.rejected += 1
             return False
         lim = self.max_thrust
-        self._command = [_clip(v, -lim, lim) for v in values]
+        self.state[THRUST_CMD:THRUST_CMD + 4] = [_clip(v, -lim, lim) for v in values]
         return True
 
     def set_failed(self, indices: Sequence[int]) -> None:
@@ -125,18 +152,22 @@ class ThrusterBank:
             raise ParameterError('failed_thrusters', f'got {list(indices)!r}; allowed: '
                                  'indices 0..3 (thruster_1..thruster_4)')
         self.failed = failed
+        self.state[THRUST_WORKING:THRUST_WORKING + 4] = [0.0 if i in failed else 1.0
+                                                         for i in range(4)]
 
     def step(self, h: float) -> None:
         """Advance the thrusts by h seconds toward the held command (exact first order);
         a failed thruster's target is zero."""
         if h != self._h:
             self._h = h
-            self._decay = math.exp(-h / self.time_constant) if self.time_constant > 0 else 0.0
+            self._decay = thruster_decay(self.time_constant, h)
         e = self._decay
-        target = self._command
+        values = self.state.tolist()
+        target = values[THRUST_CMD:THRUST_CMD + 4]
         if self.failed:
             target = [0.0 if i in self.failed else c for i, c in enumerate(target)]
-        self._thrusts = [c + (f - c) * e for f, c in zip(self._thrusts, target)]
+        self.state[THRUST:THRUST + 4] = [c + (f - c) * e for f, c in
+                                         zip(values[THRUST:THRUST + 4], target)]
 
 
 class TiltServos:
@@ -167,9 +198,11 @@ class TiltServos:
             raise ParameterError('initial tilts',
                                  f'got {start!r}; allowed: 2 values in '
                                  f'[{self.tilt_min:g}, {self.tilt_max:g}] rad')
-        self._angles = start
-        self._velocities = [0.0, 0.0]
-        self._command = list(start)
+        #: angles, velocities and command (layout: ``TILT``, ``TILT_VELOCITY``,
+        #: ``TILT_CMD``), updated in place.
+        self.state = np.zeros(SERVO_STATE)
+        self.state[TILT:TILT + 2] = start
+        self.state[TILT_CMD:TILT_CMD + 2] = start
         self.rejected = 0
 
     @classmethod
@@ -179,17 +212,17 @@ class TiltServos:
     @property
     def angles(self) -> tuple[float, ...]:
         """Actual (tilt_front, tilt_rear), rad."""
-        return tuple(self._angles)
+        return tuple(self.state[TILT:TILT + 2].tolist())
 
     @property
     def velocities(self) -> tuple[float, ...]:
         """(a_k - a_{k-1}) / h of each servo, rad/s (zero before the first step)."""
-        return tuple(self._velocities)
+        return tuple(self.state[TILT_VELOCITY:TILT_VELOCITY + 2].tolist())
 
     @property
     def command_held(self) -> tuple[float, ...]:
         """The command in force (after clipping to the angle limits), rad."""
-        return tuple(self._command)
+        return tuple(self.state[TILT_CMD:TILT_CMD + 2].tolist())
 
     def command(self, tilts: Sequence[float] | ArrayLike) -> bool:
         """Hold a new command (tilt_front, tilt_rear), rad; clipped to the angle limits.
@@ -200,13 +233,16 @@ class TiltServos:
         if not all(math.isfinite(v) for v in values):
             self.rejected += 1
             return False
-        self._command = [_clip(v, self.tilt_min, self.tilt_max) for v in values]
+        self.state[TILT_CMD:TILT_CMD + 2] = [_clip(v, self.tilt_min, self.tilt_max)
+                                             for v in values]
         return True
 
     def step(self, h: float) -> None:
         """Move each angle toward the held command by at most rate_limit * h."""
         max_move = self.rate_limit * h
+        values = self.state.tolist()
+        angles = values[TILT:TILT + 2]
         new = [c if abs(c - a) <= max_move else a + math.copysign(max_move, c - a)
-               for a, c in zip(self._angles, self._command)]
-        self._velocities = [(n - a) / h for n, a in zip(new, self._angles)]
-        self._angles = new
+               for a, c in zip(angles, values[TILT_CMD:TILT_CMD + 2])]
+        self.state[TILT_VELOCITY:TILT_VELOCITY + 2] = [(n - a) / h for n, a in zip(new, angles)]
+        self.state[TILT:TILT + 2] = new

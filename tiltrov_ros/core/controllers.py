@@ -22,6 +22,12 @@ the ROS node and the headless runner give the same numbers.
   model and integral action with a clamp (anti-windup): the constant moment of
   the center-of-mass modeling error and the net buoyancy leave no steady-state
   error.
+
+With the numba backend (:mod:`tiltrov_ros.core.jit`) each ``update`` makes one
+call of the compiled law (:mod:`tiltrov_ros.core.control_kernels`); the numpy
+code here (:func:`tracking_error` and the laws' reference branches) is the
+reference the kernels are tested against. ``controller.compiled`` says which
+runs (tests set it to compare the two).
 """
 
 from __future__ import annotations
@@ -35,9 +41,18 @@ from typing import Any, ClassVar, Literal, NamedTuple, Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from tiltrov_ros.core import control_kernels as ck
+from tiltrov_ros.core import jit
 from tiltrov_ros.core.dynamics import restoring_forces
 from tiltrov_ros.core.errors import ParameterError
-from tiltrov_ros.core.kinematics import J, Rquat, euler_from_quat, quat_normalize, ssa
+from tiltrov_ros.core.kinematics import (
+    GIMBAL_GUARD_COS,
+    J,
+    Rquat,
+    euler_from_quat,
+    quat_normalize,
+    ssa,
+)
 from tiltrov_ros.core.params import RobotParams
 from tiltrov_ros.core.paramtable import SHIPPED, Param, ParamTable, ros_parameters
 from tiltrov_ros.paths import config_file
@@ -48,8 +63,6 @@ ControllerKind = Literal['pd', 'switching', 'pid']
 CONTROLLER_KINDS: tuple[str, ...] = ('pd', 'switching', 'pid')
 CONTROLLER_YAML = 'wrench_controller.yaml'
 
-# |cos(pitch)| under which J(eta) is evaluated at a pitch just short of +-90 deg.
-_GIMBAL_COS = 1e-6
 # Switching baseline: the wrench components each mode can produce.
 _HORIZONTAL = np.array([1.0, 1.0, 0.0, 0.0, 0.0, 1.0])
 _VERTICAL = np.array([0.0, 0.0, 1.0, 1.0, 1.0, 0.0])
@@ -261,8 +274,8 @@ def tracking_error(position: ArrayLike, quaternion: ArrayLike, nu: ArrayLike,
     e[3:] = ssa(e[3:])
     # J(eta) is singular at pitch +-90 deg: evaluate it just short of there.
     eta_j = eta.copy()
-    if abs(math.cos(eta_j[4])) < _GIMBAL_COS:
-        eta_j[4] = math.copysign(math.acos(_GIMBAL_COS), eta_j[4])
+    if abs(math.cos(eta_j[4])) < GIMBAL_GUARD_COS:
+        eta_j[4] = math.copysign(math.acos(GIMBAL_GUARD_COS), eta_j[4])
     Jm = J(eta_j)
     e_dot = np.asarray(reference.velocity, dtype=float) - Jm @ np.asarray(nu, dtype=float)
     return TrackingError(eta, e, e_dot, Jm)
@@ -275,12 +288,18 @@ class PDController:
         self.gains = gains
         self._kp = np.array(gains.kp)
         self._kd = np.array(gains.kd)
+        self.compiled = jit.compiled()
+        self._law = (ck.CompiledLaw(ck.LAW_PD, ck.law_config(gains.kp, gains.kd))
+                     if self.compiled else None)
 
     def reset(self) -> None:
         """PD has no state."""
 
     def update(self, t: float, position: FloatArray, quaternion: FloatArray, nu: FloatArray,
                reference: Reference) -> ControlOutput:
+        if self.compiled and self._law is not None:
+            out = self._law(position, quaternion, nu, reference)
+            return ControlOutput(out[ck.OUT_TAU:ck.OUT_TAU + 6].copy(), None, 'pd')
         err = tracking_error(position, quaternion, nu, reference)
         return ControlOutput(err.J.T @ (self._kp * err.e + self._kd * err.e_dot), None, 'pd')
 
@@ -304,7 +323,20 @@ class PIDController:
         limit = np.array(gains.integral_limit)
         with np.errstate(divide='ignore', invalid='ignore'):
             self._max_integral = np.where(self._ki > 0, limit / self._ki, 0.0)
+        self.compiled = jit.compiled()
+        self._law = (ck.CompiledLaw(ck.LAW_PID, ck.law_config(
+            gains.kp, gains.kd, gains.ki, self._max_integral, robot=robot))
+            if self.compiled else None)
         self.reset()
+
+    @property
+    def integral(self) -> FloatArray:
+        """integral(e) per DOF (earth frame), clamped; the compiled law updates it in place."""
+        return self._integral
+
+    @integral.setter
+    def integral(self, value: ArrayLike) -> None:
+        self._integral = np.array(value, dtype=np.float64).reshape(6)
 
     def reset(self) -> None:
         self.integral = np.zeros(6)
@@ -312,6 +344,13 @@ class PIDController:
 
     def update(self, t: float, position: FloatArray, quaternion: FloatArray, nu: FloatArray,
                reference: Reference) -> ControlOutput:
+        if self.compiled and self._law is not None:
+            last = self._last_t
+            dt = 0.0 if last is None else min(max(t - last, 0.0), 1.0)
+            out = self._law(position, quaternion, nu, reference, dt=dt,
+                            integrate=last is not None, integral=self._integral)
+            self._last_t = t
+            return ControlOutput(out[ck.OUT_TAU:ck.OUT_TAU + 6].copy(), None, 'pid')
         err = tracking_error(position, quaternion, nu, reference)
         if self._last_t is not None:
             dt = min(max(t - self._last_t, 0.0), 1.0)
@@ -335,6 +374,10 @@ class SwitchingController:
         self.robot = robot
         self._kp = np.array(gains.kp)
         self._kd = np.array(gains.kd)
+        self.compiled = jit.compiled()
+        self._law = (ck.CompiledLaw(ck.LAW_SWITCHING, ck.law_config(
+            gains.kp, gains.kd, scales=(settings.position_scale, settings.angle_scale)))
+            if self.compiled else None)
         self.reset()
 
     def reset(self) -> None:
@@ -363,8 +406,14 @@ class SwitchingController:
 
     def update(self, t: float, position: FloatArray, quaternion: FloatArray, nu: FloatArray,
                reference: Reference) -> ControlOutput:
-        err = tracking_error(position, quaternion, nu, reference)
-        horizontal, vertical = self._group_errors(err.e)
+        tau: FloatArray | None = None
+        if self.compiled and self._law is not None:
+            out = self._law(position, quaternion, nu, reference)
+            tau = out[ck.OUT_TAU:ck.OUT_TAU + 6]
+            horizontal, vertical = out[ck.OUT_GROUPS:ck.OUT_GROUPS + 2].tolist()
+        else:
+            err = tracking_error(position, quaternion, nu, reference)
+            horizontal, vertical = self._group_errors(err.e)
         if self.mode is None:
             # Start where the error is larger; depth and attitude first on a tie.
             self._switch_to('horizontal' if horizontal > vertical else 'vertical', t)
@@ -376,7 +425,8 @@ class SwitchingController:
                 self._switch_to('vertical' if self.mode == 'horizontal' else 'horizontal', t)
         if t < self._moving_until:
             return ControlOutput(np.zeros(6), self.tilts, 'transition')
-        tau = err.J.T @ (self._kp * err.e + self._kd * err.e_dot)
+        if tau is None:
+            tau = err.J.T @ (self._kp * err.e + self._kd * err.e_dot)
         mask = _HORIZONTAL if self.mode == 'horizontal' else _VERTICAL
         return ControlOutput(tau * mask, self.tilts, str(self.mode))
 

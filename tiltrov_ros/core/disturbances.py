@@ -37,6 +37,11 @@ PAPER_COM_ERROR = (0.01, 0.0, 0.005)
 
 WrenchFn = Callable[[float], ArrayLike]
 
+# OceanCurrent.state: float64[CURRENT_STATE] (updated in place by the plant's kernel)
+CURRENT_B = 0            # 3 entries: the Gauss-Markov part b [m/s]
+CURRENT_VELOCITY = 3     # 3 entries: mean + b, the current now [m/s]
+CURRENT_STATE = 6
+
 
 def _vector(name: str, value: Any, n: int, *, low: float = -math.inf,
             low_open: bool = False, what: str = 'finite numbers') -> tuple[float, ...]:
@@ -119,6 +124,9 @@ class OceanCurrent:
 
     ``velocity`` is the value at the present time; :meth:`advance` moves it one
     step of h seconds ahead (exact discretisation, see the module docstring).
+    b and the velocity live in ``state`` (layout ``CURRENT_B``,
+    ``CURRENT_VELOCITY``); the plant's compiled step advances them in place
+    with the normal draws of :meth:`draw`, the same sequence :meth:`advance` uses.
     """
 
     def __init__(self, mean: ArrayLike = (0.0, 0.0, 0.0), std: ArrayLike = (0.0, 0.0, 0.0),
@@ -130,8 +138,8 @@ class OceanCurrent:
                                      low_open=True)
         self._rng = rng if rng is not None else np.random.default_rng(0)
         self._random = any(s > 0.0 for s in self.std)
-        self._b = [0.0, 0.0, 0.0]
-        self._velocity = self.mean
+        self.state = np.zeros(CURRENT_STATE)
+        self.state[CURRENT_VELOCITY:CURRENT_VELOCITY + 3] = self.mean
         self._h = -1.0
         self._phi: tuple[float, ...] = (1.0, 1.0, 1.0)
         self._gain: tuple[float, ...] = (0.0, 0.0, 0.0)
@@ -144,25 +152,43 @@ class OceanCurrent:
     @property
     def velocity(self) -> tuple[float, ...]:
         """Current velocity in NED now, m/s."""
-        return self._velocity
+        return tuple(self.state[CURRENT_VELOCITY:CURRENT_VELOCITY + 3].tolist())
 
     @property
     def gauss_markov(self) -> tuple[float, ...]:
         """The Gauss-Markov part b now, m/s."""
-        return tuple(self._b)
+        return tuple(self.state[CURRENT_B:CURRENT_B + 3].tolist())
 
-    def advance(self, h: float) -> None:
-        """Move the process h seconds ahead."""
-        if not self._random:
-            return
+    @property
+    def random(self) -> bool:
+        """True when some axis has a Gauss-Markov part (``advance`` draws numbers)."""
+        return self._random
+
+    def coefficients(self, h: float) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """(phi, sigma sqrt(1 - phi^2)) per axis for a step of h s (see the module docstring)."""
         if h != self._h:
             self._h = h
             phis = tuple(math.exp(-h / tc) for tc in self.time_constant)
             self._phi = phis
             self._gain = tuple(s * math.sqrt(1.0 - p * p) for s, p in zip(self.std, phis))
+        return self._phi, self._gain
+
+    def draw(self, out: FloatArray) -> None:
+        """Fill ``out`` (k, 3) with the standard normals of the next k :meth:`advance` calls
+        (one call of the Generator gives the same sequence as k calls of 3)."""
+        self._rng.standard_normal(out=out)
+
+    def advance(self, h: float) -> None:
+        """Move the process h seconds ahead."""
+        if not self._random:
+            return
+        phis, gains = self.coefficients(h)
         n = self._rng.standard_normal(3)
-        self._b = [p * b + g * float(z) for p, b, g, z in zip(self._phi, self._b, self._gain, n)]
-        self._velocity = tuple(m + b for m, b in zip(self.mean, self._b))
+        s = self.state
+        b = [p * b + g * float(z)
+             for p, b, g, z in zip(phis, s[CURRENT_B:CURRENT_B + 3].tolist(), gains, n)]
+        s[CURRENT_B:CURRENT_B + 3] = b
+        s[CURRENT_VELOCITY:CURRENT_VELOCITY + 3] = [m + v for m, v in zip(self.mean, b)]
 
 
 class ExternalWrench:

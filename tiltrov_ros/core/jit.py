@@ -15,11 +15,17 @@ runs and that manages numba:
   (nothing compiles at import); without it the plain Python function.
   ``signatures`` name the types a kernel is called with from Python: only
   those are compiled ahead (kernels called only from other kernels need none).
-* :func:`warmup` -- compiles (or loads from the cache) every registered kernel
-  of the given groups for its signatures, then forbids further compilation
-  (a call with other types raises instead of compiling in the middle of a
-  control tick). Nodes call it in their constructor, before they subscribe;
-  ``tiltrov warmup`` and ``make install`` call it ahead of use.
+* :func:`warmup` -- imports the kernel modules of the given groups
+  (:data:`GROUPS`), compiles (or loads from the cache) every registered kernel
+  of those groups for its signatures, then forbids further compilation (a
+  call with other types raises instead of compiling in the middle of a
+  control tick). The core objects that call kernels (``Plant``, the
+  controllers, the allocator) call it in their constructors; nodes call it
+  in their constructor, before they subscribe, and report its time on
+  ``/diagnostics``; ``tiltrov warmup`` and ``make install`` call it ahead of
+  use.
+* :func:`compilations` -- a context manager listing what numba compiles
+  meanwhile (the tests' proof that nothing compiles after construction).
 * The cache: numba writes it beside the source when the package directory is
   writable (a checkout, a venv); in a read-only install (a colcon install
   space under /opt, a system site-packages) it goes to
@@ -29,8 +35,10 @@ runs and that manages numba:
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
+import importlib
 import os
 from pathlib import Path
 import sys
@@ -43,6 +51,13 @@ BACKEND_ENV = 'TILTROV_BACKEND'
 BACKENDS = ('auto', 'numba', 'numpy')
 
 F = TypeVar('F', bound=Callable[..., Any])
+
+#: Warm-up group -> the modules whose import registers its kernels.
+GROUPS: dict[str, tuple[str, ...]] = {
+    'allocation': ('tiltrov_ros.core.allocation',),
+    'plant': ('tiltrov_ros.core.plant_kernels',),
+    'control': ('tiltrov_ros.core.control_kernels',),
+}
 
 _PACKAGE_DIR = Path(__file__).resolve().parent.parent
 
@@ -95,7 +110,8 @@ def _configure_cache() -> str | None:
     """Point numba's cache somewhere writable before numba is imported."""
     if os.environ.get('NUMBA_CACHE_DIR'):
         return os.environ['NUMBA_CACHE_DIR']
-    if all(_writable(d) for d in (_PACKAGE_DIR / 'core',)):
+    kernel_dirs = (_PACKAGE_DIR / 'core', _PACKAGE_DIR / 'core' / 'allocation' / 'kernels')
+    if all(_writable(d) for d in kernel_dirs if d.is_dir()):
         return None                                  # numba's default: beside the source
     directory = _user_cache_dir()
     os.environ['NUMBA_CACHE_DIR'] = directory
@@ -201,16 +217,24 @@ def registered(groups: Iterable[str] | None = None) -> list[Registered]:
 
 
 def warmup(groups: Iterable[str] | None = None, *, seal: bool = True) -> float:
-    """Compile or load every registered kernel of ``groups`` (default: all) for its
+    """Compile or load every kernel of ``groups`` (default: all of :data:`GROUPS`) for its
     signatures; returns the seconds it took (0 with the numpy reference).
 
-    The kernel modules must be imported first (the public modules import them).
-    ``seal``: afterwards a call with types not compiled raises instead of compiling.
+    Imports the groups' kernel modules first. ``seal``: afterwards a call with
+    types not compiled raises instead of compiling.
     """
     if not compiled():
         return 0.0
     start = time.perf_counter()
-    chosen = registered(groups)
+    names = tuple(GROUPS) if groups is None else tuple(groups)
+    unknown = [g for g in names if g not in GROUPS]
+    if unknown:
+        raise ValueError(f'unknown kernel group(s) {", ".join(unknown)}; groups: '
+                         f'{", ".join(GROUPS)}')
+    for group in names:
+        for module in GROUPS[group]:
+            importlib.import_module(module)
+    chosen = registered(names)
     for k in chosen:
         if k.sealed:
             continue
@@ -223,3 +247,32 @@ def warmup(groups: Iterable[str] | None = None, *, seal: bool = True) -> float:
     key = ','.join(sorted({k.group for k in chosen})) or 'none'
     _STATE.warm_seconds[key] = _STATE.warm_seconds.get(key, 0.0) + elapsed
     return elapsed
+
+
+def overloads() -> dict[str, int]:
+    """Registered kernel -> how many type signatures it has compiled or loaded so far
+    (unchanged over a run: nothing was compiled nor loaded during it)."""
+    return {k.name: len(k.dispatcher.overloads) for k in _STATE.kernels}
+
+
+@contextmanager
+def compilations() -> Iterator[list[str]]:
+    """Within the block, the list of the kernels numba compiles (not those it loads from
+    the cache), as ``module.name(argument types)``; always empty with the numpy backend."""
+    events: list[str] = []
+    if not compiled():
+        yield events
+        return
+    from numba.core import event
+
+    class Recorder(event.Listener):
+        def on_start(self, ev: Any) -> None:
+            d = ev.data['dispatcher']
+            events.append(f'{d.py_func.__module__}.{d.py_func.__qualname__}'
+                          f'({", ".join(str(a) for a in ev.data["args"])})')
+
+        def on_end(self, ev: Any) -> None:
+            pass
+
+    with event.install_listener('numba:compile', Recorder()):
+        yield events

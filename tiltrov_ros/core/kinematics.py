@@ -23,6 +23,9 @@ FloatArray = NDArray[np.float64]
 _TWO_PI = 2.0 * math.pi
 #: |cos(theta)| below which Tzyx and J are refused (gimbal lock).
 GIMBAL_LOCK_COS = 1e-9
+#: |cos(theta)| under which the controllers evaluate J(eta) at a pitch just short of
+#: +-90 deg (J is singular there).
+GIMBAL_GUARD_COS = 1e-6
 
 
 @overload

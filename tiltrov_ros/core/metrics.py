@@ -54,7 +54,8 @@ Further keys
     the command by more than the allocator's own test,
     ||achieved - cmd|| > FEASIBILITY_RTOL * max(||cmd||, max_thrust).
     ``ticks``, ``unmatched_ticks``, ``duration`` (s), and ``run`` (scenario,
-    controller, allocator_mode, from the meta) describe what was measured.
+    controller, allocator_mode and backend, from the meta) describe what was
+    measured.
 
 A quantity that cannot be computed (no ticks, no max_thrust in the meta) is
 ``None`` (``null`` in JSON), never NaN.
@@ -276,7 +277,7 @@ def compute_metrics(log: RunLog, *, max_thrust: float | None = None) -> dict[str
     metrics['unmatched_ticks'] = ticks - n
     metrics['duration'] = end
     metrics['run'] = {key: log.meta.get(key) for key in
-                      ('scenario', 'controller', 'allocator_mode')}
+                      ('scenario', 'controller', 'allocator_mode', 'backend')}
     return metrics
 
 

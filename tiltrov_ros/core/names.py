@@ -65,6 +65,11 @@ ROBOT_MARKERS = 'robot_markers'
 #: Key of a node's last /diagnostics status, sent as it stops (value 'true'): a recording
 #: of the whole run without it may lack the node's last messages.
 FINAL_STATUS_KEY = 'final'
+#: Keys of every stack node's /diagnostics: the implementation running (``numba``: the
+#: compiled kernels; ``numpy``: the reference) and the seconds the node's constructor
+#: took to compile or load its kernels.
+BACKEND_KEY = 'backend'
+KERNEL_WARMUP_KEY = 'kernel_warmup_s'
 
 #: Every topic of the stack -> its ROS 2 type, in the order the stack publishes
 #: them within a step and a tick.

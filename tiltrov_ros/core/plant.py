@@ -19,10 +19,14 @@ integer nanoseconds (:attr:`Plant.time_ns`); the plant step ``h`` defaults to
 10 ms, the paper's sampling time. Everything is deterministic (the only
 randomness is the current's seeded Generator).
 
-The step runs in straight-line float arithmetic (:class:`~tiltrov_ros.core.
-dynamics.RigidBody`); :func:`rk4_step` and :func:`euler_step` with
-:func:`tiltrov_ros.core.dynamics.f` are the numpy reference it is tested
-against.
+The step is compiled (:mod:`tiltrov_ros.core.plant_kernels`, when
+:func:`tiltrov_ros.core.jit.compiled`): the state lives in float64 arrays the
+kernel updates in place, and ``step(n, log=rows)`` runs n steps in one call,
+writing one sample row per step (the runner logs every step this way). The
+reference is the straight-line float arithmetic of :class:`~tiltrov_ros.core.
+dynamics.RigidBody` with the actuator models' own ``step`` methods (the path
+with the numpy backend), itself tested against :func:`rk4_step` and
+:func:`euler_step` with :func:`tiltrov_ros.core.dynamics.f`.
 """
 
 from __future__ import annotations
@@ -34,12 +38,23 @@ from typing import Any, Literal, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tiltrov_ros.core.actuators import ThrusterBank, TiltServos
+from tiltrov_ros.core import jit
+from tiltrov_ros.core.actuators import THRUST, TILT, ThrusterBank, TiltServos, thruster_decay
 from tiltrov_ros.core.disturbances import Disturbances, ExternalWrench, OceanCurrent
 from tiltrov_ros.core.dynamics import RigidBody
 from tiltrov_ros.core.errors import ParameterError
 from tiltrov_ros.core.kinematics import Rquat, euler_from_quat
 from tiltrov_ros.core.params import RobotParams
+from tiltrov_ros.core.plant_kernels import (
+    LOG_THRUSTS,
+    LOG_TILT_VELOCITIES,
+    LOG_TILTS,
+    LOG_WIDTH,
+    LOG_X,
+    WORK_SIZE,
+    plant_config,
+    plant_steps,
+)
 from tiltrov_ros.core.thrust_map import allocation_matrix
 from tiltrov_ros.core.timebase import NS_PER_S, seconds
 
@@ -50,6 +65,16 @@ Integrator = Literal['rk4', 'euler']
 DEFAULT_STEP_NS = 10_000_000
 
 StateFn = Callable[[float, FloatArray], FloatArray]
+
+#: Columns of the sample rows ``Plant.step(n, log=rows)`` writes: t [s], position (3),
+#: quaternion (4), nu (6), tilts (2), tilt velocities (2), thrusts (4).
+SAMPLE_WIDTH = LOG_WIDTH
+#: PlantSample field -> its column(s) in a sample row (``t``: seconds, not ns).
+SAMPLE_COLUMNS: dict[str, int | slice] = {
+    't': 0, 'position': slice(LOG_X, LOG_X + 3), 'quaternion': slice(LOG_X + 3, LOG_X + 7),
+    'nu': slice(LOG_X + 7, LOG_X + 13), 'tilts': slice(LOG_TILTS, LOG_TILTS + 2),
+    'tilt_velocities': slice(LOG_TILT_VELOCITIES, LOG_TILT_VELOCITIES + 2),
+    'thrusts': slice(LOG_THRUSTS, LOG_THRUSTS + 4)}
 
 
 def rk4_step(fun: StateFn, t: float, x: ArrayLike, h: float) -> FloatArray:
@@ -137,8 +162,9 @@ class Plant:
         qn = math.sqrt(sum(v * v for v in q))
         if qn == 0.0:
             raise ParameterError('initial quaternion', 'got a zero quaternion')
-        self._x: list[float] = (_floats(position, 3, 'initial position')
-                                + [v / qn for v in q] + _floats(nu, 6, 'initial nu'))
+        #: x = [position (3), quaternion (4), nu (6)], updated in place.
+        self._x = np.array(_floats(position, 3, 'initial position') + [v / qn for v in q]
+                           + _floats(nu, 6, 'initial nu'))
 
         self.thrusters = ThrusterBank.from_params(self.params, thrusts)
         self.servos = TiltServos.from_params(self.params, tilts)
@@ -149,6 +175,21 @@ class Plant:
         # Eq. (5), tau = A q, with A from thrust_map (the one source of the geometry).
         self._A_rows = tuple(tuple(float(a) for a in row)
                              for row in allocation_matrix(self.params.length, self.params.width))
+
+        #: True: ``step`` runs the compiled kernel; False: the float reference (the
+        #: numpy backend; tests set it to compare the two).
+        self.compiled = jit.compiled()
+        self._cfg = plant_config(self.params, self._h,
+                                 thruster_decay(self.thrusters.time_constant, self._h),
+                                 integrator == 'rk4', self.current.random,
+                                 *self.current.coefficients(self._h), self.current.mean)
+        self._work = np.zeros(WORK_SIZE)
+        self._ext_rows = (np.array([self.external_wrench(0.0)])
+                          if self.external_wrench.is_constant else np.zeros((1, 6)))
+        self._noise = np.zeros((1, 3))
+        self._no_log = np.zeros((0, LOG_WIDTH))
+        if self.compiled:
+            jit.warmup(('plant',))      # compiled (or loaded) now, never during a step
 
     # -- time -----------------------------------------------------------------
 
@@ -172,22 +213,22 @@ class Plant:
     @property
     def state(self) -> FloatArray:
         """x = [position NED (3), quaternion (w, x, y, z) (4), nu (6)]."""
-        return np.array(self._x)
+        return self._x.copy()
 
     @property
     def position(self) -> FloatArray:
         """Body origin in NED, m."""
-        return np.array(self._x[0:3])
+        return self._x[0:3].copy()
 
     @property
     def quaternion(self) -> FloatArray:
         """Body FRD orientation in NED, (w, x, y, z), unit norm."""
-        return np.array(self._x[3:7])
+        return self._x[3:7].copy()
 
     @property
     def nu(self) -> FloatArray:
         """Body velocity (u v w p q r), m/s and rad/s."""
-        return np.array(self._x[7:13])
+        return self._x[7:13].copy()
 
     @property
     def rotation(self) -> FloatArray:
@@ -226,9 +267,15 @@ class Plant:
 
     def sample(self) -> PlantSample:
         """The present state as plain floats (cheap; used for logging every step)."""
-        x = self._x
+        x = self._x.tolist()
         return PlantSample(self._t_ns, tuple(x[0:3]), tuple(x[3:7]), tuple(x[7:13]),
                            self.servos.angles, self.servos.velocities, self.thrusters.thrusts)
+
+    def write_sample(self, row: FloatArray) -> None:
+        """The present state into a sample row (``SAMPLE_WIDTH`` columns, as ``step`` logs)."""
+        s = self.sample()
+        row[:] = [seconds(s.t_ns), *s.position, *s.quaternion, *s.nu, *s.tilts,
+                  *s.tilt_velocities, *s.thrusts]
 
     def thrust_wrench(self) -> FloatArray:
         """Eq. (4) of the actual thrusts and tilts, body frame, N and N m."""
@@ -267,35 +314,79 @@ class Plant:
         """Indices 0..3 of the failed thrusters."""
         return self.thrusters.failed
 
-    def step(self, n: int = 1) -> None:
-        """Advance n plant steps (see the module docstring)."""
+    def step(self, n: int = 1, log: FloatArray | None = None) -> None:
+        """Advance n plant steps (see the module docstring).
+
+        ``log``: a C-contiguous float64 array of at least n rows of
+        ``SAMPLE_WIDTH`` columns; row k receives the sample after step k (what
+        :meth:`sample` would give then, time in s).
+        """
+        if log is not None:
+            _check_log(log, n)
+        if n <= 0:
+            return
+        if not self.compiled:
+            self._step_reference(n, log)
+            return
+        if self.external_wrench.is_constant:
+            self._run_kernel(n, self._ext_rows, 0, log)
+            return
+        rows = self._ext_rows if len(self._ext_rows) >= n else np.zeros((n, 6))
+        self._ext_rows = rows
+        for k in range(n):
+            try:
+                rows[k] = self.external_wrench(seconds(self._t_ns + k * self.step_ns))
+            except ValueError:
+                self._run_kernel(k, rows, 1, log)       # the steps before it happen
+                raise
+        self._run_kernel(n, rows, 1, log)
+
+    def _run_kernel(self, n: int, ext: FloatArray, stride: int,
+                    log: FloatArray | None) -> None:
+        noise = self._noise
+        if self.current.random and n:
+            if len(noise) < n:
+                self._noise = noise = np.zeros((n, 3))
+            self.current.draw(noise if len(noise) == n else noise[:n])
+        plant_steps(n, self._t_ns, self.step_ns, self._x, self.thrusters.state,
+                    self.servos.state, self.current.state, self._cfg, ext, stride, noise,
+                    self._no_log if log is None else log, self._work)
+        self._t_ns += n * self.step_ns
+
+    def _step_reference(self, n: int, log: FloatArray | None) -> None:
+        """The float path (numpy backend): RigidBody's derivative and the actuator models."""
         h = self._h
         deriv = self.body.derivative
         rk4 = self.integrator == 'rk4'
-        for _ in range(n):
-            thr = self._thrust_wrench()
-            ext = self.external_wrench(seconds(self._t_ns))
-            tau = [a + b for a, b in zip(thr, ext)]
-            vc = self.current.velocity
-            x = self._x
-            if rk4:
-                x = _rk4(deriv, x, tau, vc, h)
-            else:
-                k1 = deriv(x, tau, vc)
-                x = [a + h * b for a, b in zip(x, k1)]
-            qw, qx, qy, qz = x[3:7]
-            inv = 1.0 / math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
-            x[3:7] = [qw * inv, qx * inv, qy * inv, qz * inv]
-            self._x = x
-            self.thrusters.step(h)
-            self.servos.step(h)
-            self.current.advance(h)
-            self._t_ns += self.step_ns
+        x = self._x.tolist()
+        try:
+            for k in range(n):
+                thr = self._thrust_wrench()
+                ext = self.external_wrench(seconds(self._t_ns))
+                tau = [a + b for a, b in zip(thr, ext)]
+                vc = self.current.velocity
+                if rk4:
+                    x = _rk4(deriv, x, tau, vc, h)
+                else:
+                    k1 = deriv(x, tau, vc)
+                    x = [a + h * b for a, b in zip(x, k1)]
+                qw, qx, qy, qz = x[3:7]
+                inv = 1.0 / math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+                x[3:7] = [qw * inv, qx * inv, qy * inv, qz * inv]
+                self.thrusters.step(h)
+                self.servos.step(h)
+                self.current.advance(h)
+                self._t_ns += self.step_ns
+                if log is not None:
+                    self._x[:] = x
+                    self.write_sample(log[k])
+        finally:
+            self._x[:] = x
 
     def _thrust_wrench(self) -> list[float]:
         """Eq. (4) as A q of eq. (5), in floats."""
-        f1, f2, f3, f4 = self.thrusters.thrusts
-        alpha, beta = self.servos.angles
+        f1, f2, f3, f4 = self.thrusters.state[THRUST:THRUST + 4].tolist()
+        alpha, beta = self.servos.state[TILT:TILT + 2].tolist()
         sa, ca, sb, cb = math.sin(alpha), math.cos(alpha), math.sin(beta), math.cos(beta)
         q0, q1, q2, q3 = f1 * sa, f2 * sa, f3 * sb, f4 * sb
         q4, q5, q6, q7 = f1 * ca, f2 * ca, f3 * cb, f4 * cb
@@ -314,6 +405,14 @@ class Plant:
             'max_thrust': p.max_thrust, 'tilt_min': p.tilt_min, 'tilt_max': p.tilt_max,
             'tilt_rate_limit': p.tilt_rate_limit,
         }
+
+
+def _check_log(log: FloatArray, n: int) -> None:
+    if not (isinstance(log, np.ndarray) and log.dtype == np.float64 and log.ndim == 2
+            and log.shape[0] >= n and log.shape[1] == LOG_WIDTH
+            and log.flags.c_contiguous and log.flags.writeable):
+        raise ValueError(f'log: expected a writable C-contiguous float64 array of at least '
+                         f'{n} rows of {LOG_WIDTH}, got {getattr(log, "shape", log)!r}')
 
 
 def _rk4(deriv: Callable[[Sequence[float], Sequence[float], Sequence[float]], list[float]],

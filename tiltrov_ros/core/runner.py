@@ -39,6 +39,7 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from tiltrov_ros.core import jit
 from tiltrov_ros.core.allocation import (
     AllocatorConfig,
     ThrustAllocator,
@@ -54,7 +55,7 @@ from tiltrov_ros.core.controllers import (
 from tiltrov_ros.core.errors import ParameterError
 from tiltrov_ros.core.kinematics import quat_from_euler
 from tiltrov_ros.core.params import RobotParams, load_control_period, load_robot_params
-from tiltrov_ros.core.plant import Plant, PlantSample
+from tiltrov_ros.core.plant import SAMPLE_COLUMNS, SAMPLE_WIDTH, Plant
 from tiltrov_ros.core.runlog import RunLog
 from tiltrov_ros.core.scenarios import Scenario, ThrusterFault, failed_at, load_scenario
 from tiltrov_ros.core.timebase import seconds, to_ns
@@ -180,14 +181,19 @@ def run(plant: Plant, controller: ControllerLike, allocator: AllocatorLike,
     ticks_every = control_period_ns // h_ns
     report_every = max(1, n_steps // 100)
 
-    samples: list[PlantSample] = [plant.sample()]
+    # One sample row per plant step (t = 0 first): the plant writes them itself, n steps
+    # per call (from one control tick to the next; step by step while faults may strike).
+    samples = np.empty((n_steps + 1, SAMPLE_WIDTH))
+    plant.write_sample(samples[0])
     rows: dict[str, list[Any]] = {name: [] for name in (
         'tc', 'setpoint_position', 'setpoint_quaternion', 'setpoint_velocity', 'wrench_cmd',
         'thrust_cmd', 'tilt_cmd', 'wrench_achieved')}
     infeasible = 0
     previous: Any = None
     known: tuple[int, ...] = ()
-    for i in range(n_steps):
+    i = 0
+    next_report = report_every
+    while i < n_steps:
         if faults:
             failed = failed_at(faults, seconds(plant.time_ns))
             if failed != plant.failed_thrusters:
@@ -225,10 +231,12 @@ def run(plant: Plant, controller: ControllerLike, allocator: AllocatorLike,
             rows['thrust_cmd'].append(thrusts)
             rows['tilt_cmd'].append(tilts)
             rows['wrench_achieved'].append(_vector(result.achieved, 6, 'achieved wrench'))
-        plant.step()
-        samples.append(plant.sample())
-        if progress is not None and (i + 1) % report_every == 0 and i + 1 < n_steps:
-            progress((i + 1) / n_steps)
+        k = 1 if faults else min(ticks_every - i % ticks_every, n_steps - i)
+        plant.step(k, log=samples[i + 1:i + 1 + k])
+        i += k
+        if progress is not None and i >= next_report and i < n_steps:
+            progress(i / n_steps)
+            next_report = (i // report_every + 1) * report_every
     if progress is not None:
         progress(1.0)
 
@@ -244,21 +252,18 @@ def run(plant: Plant, controller: ControllerLike, allocator: AllocatorLike,
     return _runlog(samples, rows, run_meta)
 
 
-def _runlog(samples: list[PlantSample], rows: dict[str, list[Any]],
-            meta: dict[str, Any]) -> RunLog:
-    plant_cols = list(zip(*samples))
-    arrays: dict[str, Any] = {
-        't': np.array([seconds(t) for t in plant_cols[0]]),
-        'position': np.array(plant_cols[1]),
-        'quaternion': np.array(plant_cols[2]),
-        'nu': np.array(plant_cols[3]),
-        'tilt_position': np.array(plant_cols[4]),
-        'tilt_velocity': np.array(plant_cols[5]),
-        'thrust': np.array(plant_cols[6]),
-    }
+def _runlog(samples: FloatArray, rows: dict[str, list[Any]], meta: dict[str, Any]) -> RunLog:
+    arrays: dict[str, Any] = {name: np.ascontiguousarray(samples[:, SAMPLE_COLUMNS[field]])
+                              for name, field in _PLANT_FIELDS.items()}
     for name, values in rows.items():
         arrays[name] = np.array(values, dtype=float)
     return RunLog(**arrays, meta=meta)
+
+
+#: RunLog plant field -> the PlantSample field it logs.
+_PLANT_FIELDS = {'t': 't', 'position': 'position', 'quaternion': 'quaternion', 'nu': 'nu',
+                 'tilt_position': 'tilts', 'tilt_velocity': 'tilt_velocities',
+                 'thrust': 'thrusts'}
 
 
 def hold_reference(position: ArrayLike = (0.0, 0.0, 0.0),
@@ -317,7 +322,8 @@ class StackConfig:
         return self.allocator.build(self.robot, self.control_period, failed_thrusters)
 
     def describe(self) -> dict[str, Any]:
-        """JSON-serialisable run description for RunLog.meta and bags."""
+        """JSON-serialisable run description for RunLog.meta and bags (``backend``: the
+        implementation that runs, ``numba`` or ``numpy``: core/jit.py)."""
         return {
             'scenario': self.scenario.name,
             'scenario_file': self.scenario.source,
@@ -330,6 +336,7 @@ class StackConfig:
             'tilt_min': self.robot.tilt_min,
             'tilt_max': self.robot.tilt_max,
             'tilt_rate_limit': self.robot.tilt_rate_limit,
+            'backend': jit.backend(),
         }
 
 

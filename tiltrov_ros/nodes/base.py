@@ -24,9 +24,16 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
 
-from tiltrov_ros.core import validation
+from tiltrov_ros.core import jit, validation
 from tiltrov_ros.core.errors import ParameterError
-from tiltrov_ros.core.names import CLOCK, DIAGNOSTICS, FINAL_STATUS_KEY, join_namespace
+from tiltrov_ros.core.names import (
+    BACKEND_KEY,
+    CLOCK,
+    DIAGNOSTICS,
+    FINAL_STATUS_KEY,
+    KERNEL_WARMUP_KEY,
+    join_namespace,
+)
 from tiltrov_ros.core.paramtable import Param, ParamTable
 from tiltrov_ros.core.validation import InvalidInput
 
@@ -140,6 +147,10 @@ class TiltrovNode(InputGuard, Node):
     #: The node subscribes to /clock itself and rejects bad samples there (the time
     #: source then drops them without counting them a second time).
     reads_clock: ClassVar[bool] = False
+    #: The compiled-kernel groups the node calls (core/jit.py): compiled or loaded in the
+    #: constructor, blocking, before anything subscribes, so that no tick waits for a
+    #: compiler (and none runs the reference first and the kernels later).
+    kernel_groups: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self, node_name: str, *, namespace: str | None = None,
                  context: Context | None = None, cli_args: Sequence[str] | None = None,
@@ -148,6 +159,8 @@ class TiltrovNode(InputGuard, Node):
         super().__init__(node_name, namespace=namespace, context=context,
                          cli_args=list(cli_args) if cli_args is not None else None,
                          parameter_overrides=overrides)
+        #: s: this constructor's compiling or loading of its kernels (/diagnostics).
+        self.kernel_warmup = jit.warmup(self.kernel_groups) if self.stack_node else 0.0
         #: The process-wide arguments, then the node's own: parameter files and -p
         #: values apply in this order (later ones win) and errors name the file.
         self._source_args = [*init_args(self.context), *(cli_args or ())]
@@ -367,7 +380,8 @@ class TiltrovNode(InputGuard, Node):
         if unsafe:
             message = f'{message}; {unsafe} non-finite output(s) withheld'
         values = {**values, 'callback_errors': self.callback_errors,
-                  'rejected_messages': rejected}
+                  'rejected_messages': rejected, BACKEND_KEY: jit.backend(),
+                  KERNEL_WARMUP_KEY: self.kernel_warmup}
         if self.on_sim_time():
             values['clock_jumps_back'] = self.time_source.jumps_back
         values.update({f'rejected.{topic}.{reason}': n

@@ -117,6 +117,8 @@ _REJECTED: list[float] = []
 class PlantSimulator(TiltrovNode):
     """The simulated robot (see the module docstring)."""
 
+    kernel_groups = ('plant',)
+
     def __init__(self, *, node_name: str = PLANT, namespace: str | None = None,
                  context: Any = None, cli_args: Sequence[str] | None = None,
                  parameter_overrides: Overrides = None) -> None:

@@ -124,6 +124,8 @@ def thruster_names(indices: Sequence[int]) -> str:
 class ThrustAllocatorNode(TiltRequests, TiltrovNode):
     """The thrust allocator (see the module docstring)."""
 
+    kernel_groups = ('allocation',)
+
     def __init__(self, *, node_name: str = ALLOCATOR, namespace: str | None = None,
                  context: Any = None, cli_args: Sequence[str] | None = None,
                  parameter_overrides: Overrides = None) -> None:

@@ -140,6 +140,8 @@ def _config_mapping(get: Any) -> dict[str, Any]:
 class WrenchController(TiltrovNode):
     """The wrench controller (see the module docstring)."""
 
+    kernel_groups = ('control',)
+
     def __init__(self, *, node_name: str = CONTROLLER, namespace: str | None = None,
                  context: Any = None, cli_args: Sequence[str] | None = None,
                  parameter_overrides: Overrides = None) -> None:
