@@ -52,7 +52,7 @@ def _tf_at(probe: Probe, ns: int) -> bool:
 def lockstep_tree() -> dict[str, Any]:
     """One lockstep run (pitch_hold, pd, 2 s): odom, joint_states, every /tf, and
     /tf_static as a late-joining reader gets it."""
-    from conftest import RosHarness
+    from harness import RosHarness
 
     ros = RosHarness()
     try:
