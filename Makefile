@@ -6,13 +6,14 @@ PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
+TF2_STAMP := $(VENV)/.tf2_msgs
 OUT    ?= runs/demo
 
 # DDS isolation for the commands run from here: stay on this machine.
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export MPLBACKEND ?= Agg
 
-.PHONY: install ros2-cli demo test lint typecheck bench bench-all soak figures docs campaign clean help
+.PHONY: install tf2-msgs ros2-cli demo test lint typecheck bench bench-all soak figures docs campaign clean help
 
 # The real ros2 command line (ros2cli, launch, launch_ros as wheels, with an install.sh)
 # for the tests that drive the package as a ROS user does: installed into .venv by
@@ -23,15 +24,16 @@ help:
 	@echo "make demo     run the full stack on the paper's positioning scenario (bag, figures, metrics)"
 	@echo "make test     lint, type-check and run the whole test suite"
 	@echo "make install  create .venv with rclpy (ROS 2 Jazzy wheels) and this package"
+	@echo "make tf2-msgs build tf2_msgs (/tf) into .venv again (make install does it once)"
 	@echo "make ros2-cli add the ros2 command line to .venv (from TILTROV_ROS2_CLI, if present)"
 	@echo "make bench    the hot path's targets: each figure compiled and numpy reference, fresh processes"
 	@echo "make bench-all every benchmark (speed ratios against baselines measured in the same run)"
 	@echo "make soak     one hour of simulated time in lockstep (not part of make test)"
 	@echo "make figures  regenerate the results page (docs/results.md) and its figures"
-	@echo "make docs     regenerate docs/parameters.md from the parameter tables"
+	@echo "make docs     regenerate docs/parameters.md and urdf/tiltrov.urdf from the code"
 	@echo "make campaign a small random station-keeping campaign on a local Dask cluster"
 
-install: $(STAMP)
+install: $(STAMP) $(TF2_STAMP)
 
 $(STAMP): setup.py setup.cfg package.xml requirements/ros-jazzy.txt requirements/constraints.txt
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -44,6 +46,18 @@ $(STAMP): setup.py setup.cfg package.xml requirements/ros-jazzy.txt requirements
 	$(VENV)/bin/tiltrov warmup
 	@touch $(STAMP)
 
+# tf2_msgs (the type of /tf) has no wheel: built from tools/tf2_msgs with the message
+# toolchain of requirements/ros-jazzy-interfaces.txt when the venv cannot import it
+# (needs cmake and a C/C++ compiler; without them the stack runs without /tf).
+$(TF2_STAMP): $(STAMP) tools/build_tf2_msgs.sh tools/tf2_msgs/CMakeLists.txt \
+		tools/tf2_msgs/package.xml tools/tf2_msgs/msg/TFMessage.msg \
+		requirements/ros-jazzy-interfaces.txt
+	@bash tools/build_tf2_msgs.sh $(VENV)
+	@touch $@
+
+tf2-msgs: $(STAMP)
+	@bash tools/build_tf2_msgs.sh $(VENV)
+
 ros2-cli: $(STAMP)
 	@if [ -f "$(TILTROV_ROS2_CLI)/install.sh" ]; then \
 		bash "$(TILTROV_ROS2_CLI)/install.sh" $(VENV); \
@@ -51,7 +65,7 @@ ros2-cli: $(STAMP)
 		echo "no ros2 command line at TILTROV_ROS2_CLI=$(TILTROV_ROS2_CLI): the tests with the real ros2 are skipped"; \
 	fi
 
-demo: $(STAMP)
+demo: $(STAMP) $(TF2_STAMP)
 	$(VENV)/bin/tiltrov demo --out $(OUT)
 
 lint: $(STAMP)
@@ -59,7 +73,7 @@ lint: $(STAMP)
 	$(VENV)/bin/mypy
 
 # Tests run derandomized (the same Hypothesis examples every run): see test/conftest.py.
-test: lint
+test: lint $(TF2_STAMP)
 	TILTROV_HYPOTHESIS_PROFILE=ci $(VENV)/bin/pytest
 
 bench: $(STAMP)
@@ -76,6 +90,7 @@ figures: $(STAMP)
 
 docs: $(STAMP)
 	$(PY) -m tiltrov_ros.nodes.parameter_docs docs/parameters.md
+	$(PY) -m tiltrov_ros.core.robot_description urdf/tiltrov.urdf
 
 # A small version by default; `make campaign SAMPLES=200 CAMPAIGN_OUT=runs/camp` for the
 # real one. --resume: run again, it only finishes what is missing and re-summarizes.

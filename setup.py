@@ -35,6 +35,8 @@ setup(
         ('share/' + package_name + '/config/scenarios', glob('config/scenarios/*.yaml')),
         ('share/' + package_name + '/config/foxglove', glob('config/foxglove/*.json')),
         ('share/' + package_name + '/config/plotjuggler', glob('config/plotjuggler/*.xml')),
+        ('share/' + package_name + '/config/rviz', glob('config/rviz/*.rviz')),
+        ('share/' + package_name + '/urdf', glob('urdf/*.urdf')),
         ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
         ('share/' + package_name + '/config/campaigns', glob('config/campaigns/*.yaml')),
     ],

@@ -21,6 +21,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
 from nav_msgs.msg import Odometry
 import numpy as np
+import pytest
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
@@ -47,6 +48,27 @@ TOPIC_TYPES: dict[str, Any] = {
     'thrust_cmd': JointState, 'tilt_cmd': JointState, 'wrench_achieved': WrenchStamped,
     '/diagnostics': DiagnosticArray, 'robot_markers': MarkerArray,
 }
+
+
+#: Readers of what is written once for every reader (/tf_static, robot_description).
+LATCHED = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                     history=HistoryPolicy.KEEP_LAST, depth=1)
+
+
+def require_tf2_msgs() -> Any:
+    """tf2_msgs/msg/TFMessage, for the tests of /tf and /tf_static. The venv has it once
+    ``make install`` built it (tools/tf2_msgs), a ROS install always: where it is missing
+    the test is skipped, except under CI (``CI`` set, as .ci/run does), whose fresh clone
+    must have built it, where that is a failure."""
+    try:
+        from tf2_msgs.msg import TFMessage
+    except ImportError as exc:
+        reason = f'tf2_msgs is not importable ({exc}): `make install` builds it'
+        if os.environ.get('CI'):
+            pytest.fail(reason, pytrace=False)
+        pytest.skip(reason)
+    return TFMessage
 
 
 class Probe:
@@ -186,11 +208,13 @@ STACK_TOPICS = tuple(t for t in names.STACK_TOPICS
 
 def run_stack(context: Any, executor: Any, options: LaunchOptions, *,
               topics: Sequence[str] = STACK_TOPICS, timeout: float = 60.0,
-              namespace: str = '') -> StackRun:
+              namespace: str = '', last: Callable[[Probe, int], bool] | None = None
+              ) -> StackRun:
     """Build the launcher's nodes in ``context``, spin ``executor`` until the plant ends.
 
     The caller owns ``executor``; the nodes and the probe node are removed from
-    it and destroyed before returning (the messages stay in the probe).
+    it and destroyed before returning (the messages stay in the probe), once the
+    last ``odom`` (and ``last(probe, end_ns)``, if given) reached the probe.
     """
     import rclpy
 
@@ -208,8 +232,8 @@ def run_stack(context: Any, executor: Any, options: LaunchOptions, *,
             f'the plant stopped at {plant.plant.time_ns / NS} s of {duration} s')
         # The last messages: the state at the end reaches the probe.
         end = plant.plant.time_ns
-        spin(executor, lambda: 'odom' not in topics or (probe.stamps('odom') or [0])[-1] >= end,
-             5.0)
+        spin(executor, lambda: ('odom' not in topics or (probe.stamps('odom') or [0])[-1] >= end)
+             and (last is None or last(probe, end)), 5.0)
         run.extra['stalls'] = plant.stalls
         run.extra['startup_retries'] = plant.startup_retries
     finally:

@@ -18,7 +18,11 @@ from tiltrov_ros.bag.msgdefs import message_class
 from tiltrov_ros.core.names import (
     DIAGNOSTICS,
     FRAME_EARTH,
+    ROBOT_DESCRIPTION,
     STACK_TOPICS,
+    TF,
+    TF_STATIC,
+    TF_TOPICS,
     THRUSTERS,
     TILTS,
 )
@@ -79,12 +83,19 @@ def test_foxglove_layout_has_the_layout_data_shape() -> None:
     assert kinds.count('Plot') == 5
 
 
-def test_foxglove_3d_panel_shows_the_markers_and_odometry_in_odom_ned() -> None:
+def test_foxglove_3d_panel_shows_the_markers_odometry_tree_and_urdf_in_odom_ned() -> None:
+    """odom_ned is a frame with or without the tree (the markers' and odom's frame); the
+    tree places the URDF that robot_description carries (the plant's, or
+    robot_state_publisher's)."""
     three_d = _foxglove()['configById']['3D!robot']
     assert three_d['followTf'] == FRAME_EARTH
     assert three_d['followMode'] in ('follow-pose', 'follow-position', 'follow-none')
-    assert set(three_d['topics']) == {'/robot_markers', '/odom'}
-    assert all(t in TOPICS for t in three_d['topics'])
+    assert set(three_d['topics']) == {'/robot_markers', '/odom', TF, TF_STATIC}
+    assert all(t in TOPICS or t in TF_TOPICS for t in three_d['topics'])
+    (urdf,) = [layer for layer in three_d['layers'].values()
+               if layer['layerId'] == 'foxglove.Urdf']
+    assert urdf['sourceType'] == 'topic' and urdf['topic'] == f'/{ROBOT_DESCRIPTION}'
+    assert urdf['framePrefix'] == '' and urdf['visible'] is True
     assert {'distance', 'phi', 'thetaOffset', 'perspective'} <= set(three_d['cameraState'])
     diagnostics = _foxglove()['configById']['DiagnosticSummary!stack']
     assert diagnostics['topicToRender'] == DIAGNOSTICS and diagnostics['pinnedIds'] == []

@@ -31,7 +31,8 @@ def test_package_xml_is_format_3_ament_python() -> None:
     assert package.get_build_type() == 'ament_python'
     exec_deps = {dep.name for dep in package.exec_depends}
     assert {'rclpy', 'nav_msgs', 'geometry_msgs', 'sensor_msgs', 'std_msgs', 'rosgraph_msgs',
-            'diagnostic_msgs', 'python3-numpy', 'python3-scipy'} <= exec_deps
+            'diagnostic_msgs', 'tf2_msgs', 'robot_state_publisher', 'python3-numpy',
+            'python3-scipy'} <= exec_deps
     assert 'python3-pytest' in {dep.name for dep in package.test_depends}
 
 
@@ -60,8 +61,9 @@ def test_colcon_build_installs_what_ros2_run_needs(colcon_workspace: Workspace) 
     share = prefix / 'share'
     assert (share / 'ament_index' / 'resource_index' / 'packages' / 'tiltrov_ros').is_file()
     assert (share / 'tiltrov_ros' / 'package.xml').is_file()
-    shipped = sorted(p.relative_to(REPO) for pattern in ('*.yaml', '*.json', '*.xml')
+    shipped = sorted(p.relative_to(REPO) for pattern in ('*.yaml', '*.json', '*.xml', '*.rviz')
                      for p in (REPO / 'config').rglob(pattern))
+    shipped += [p.relative_to(REPO) for p in (REPO / 'urdf').glob('*.urdf')]
     assert shipped, 'config/ ships parameter files and layouts'
     shipped += [p.relative_to(REPO) for p in (REPO / 'launch').glob('*.launch.py')]
     for rel in shipped:

@@ -71,3 +71,13 @@ def test_the_body_axes_point_the_same_way_in_the_world(roll, pitch, yaw, v) -> N
     np.testing.assert_allclose(back[0], v[:3], atol=1e-12)
     np.testing.assert_allclose(back[1] * np.sign(back[1] @ q_enu), q_enu, atol=1e-12)
     np.testing.assert_allclose(back[2], v[3:], atol=1e-12)
+
+
+def test_the_static_relations_are_rep_105s() -> None:
+    """``odom -> odom_ned``: the NED axes north, east, down are ENU's y, x and -z;
+    ``base_link -> base_link_frd``: forward stays, starboard is FLU's -y, down is -z."""
+    from tiltrov_ros.core.frames import BODY_RELATION, EARTH_RELATION
+
+    np.testing.assert_allclose(Rquat(EARTH_RELATION),
+                               [[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]], atol=1e-15)
+    np.testing.assert_allclose(Rquat(BODY_RELATION), np.diag([1.0, -1.0, -1.0]), atol=1e-15)

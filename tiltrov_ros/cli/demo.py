@@ -129,6 +129,7 @@ def summary_table(metrics: dict[str, dict[str, Any]]) -> str:
 
 def _demo(args: argparse.Namespace) -> int:
     from tiltrov_ros.analysis.analyze import analyze
+    from tiltrov_ros.nodes.transforms import NO_TF2_MSGS, TFMessage
 
     controllers = parse_controllers(args.controllers)
     if args.duration is not None and not args.duration > 0:
@@ -141,6 +142,8 @@ def _demo(args: argparse.Namespace) -> int:
     mode = 'one process' if args.single_process else 'one process per node'
     _say(f'the full ROS stack ({mode}, lockstep, Fast DDS) on {args.scenario}, '
          f'controllers: {", ".join(controllers)}')
+    if TFMessage is None:
+        _say(f'{NO_TF2_MSGS}: the bags have no transform tree')
     bags = []
     for controller in controllers:
         bag, log_path = out / 'bags' / controller, out / 'logs' / f'{controller}.log'

@@ -14,6 +14,11 @@ between the two, exactly as the rotations say:
   (w, x, y, z). In Euler angles: roll the same, pitch negated, yaw
   ``pi/2 - yaw_enu``.
 
+The same rotations are the REP-105 relations of the transform tree the plant
+publishes (:data:`EARTH_RELATION`, :data:`BODY_RELATION` on ``/tf_static``, and
+``odom -> base_link`` from :func:`pose_ned_to_enu` on ``/tf``), so an ENU tool
+and a NED tool see one pose.
+
 Pure numpy; the nodes call these on the arrays of a message.
 """
 
@@ -40,6 +45,13 @@ _FLU_FRD = np.array([1.0, -1.0, -1.0])
 _Q_FLU_FRD = np.array([0.0, 1.0, 0.0, 0.0])
 
 
+#: The static transforms parent -> child of REP-105's pairs, as quaternions (w, x, y, z)
+#: of the child frame's orientation in the parent (no translation): ``odom -> odom_ned``
+#: (R_enu_ned, its own inverse) and ``base_link -> base_link_frd`` (R_flu_frd).
+EARTH_RELATION = _Q_NED_ENU.copy()
+BODY_RELATION = _Q_FLU_FRD.copy()
+
+
 def _conjugate(q: FloatArray) -> FloatArray:
     return np.array([q[0], -q[1], -q[2], -q[3]])
 
@@ -62,8 +74,21 @@ def enu_to_ned(position: ArrayLike, quaternion: ArrayLike, twist: ArrayLike
 def ned_to_enu(position: ArrayLike, quaternion: ArrayLike, twist: ArrayLike
                ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """NED/FRD -> ENU/FLU, the inverse of :func:`enu_to_ned`."""
-    p = _NED_ENU.T @ np.asarray(position, dtype=float)
-    q = quat_multiply(quat_multiply(_conjugate(_Q_NED_ENU), quat_normalize(quaternion)),
-                      _conjugate(_Q_FLU_FRD))
+    p, q = pose_ned_to_enu(position, quaternion)
     nu = np.asarray(twist, dtype=float)
-    return p, _positive(q), np.concatenate([_FLU_FRD * nu[:3], _FLU_FRD * nu[3:]])
+    return p, q, np.concatenate([_FLU_FRD * nu[:3], _FLU_FRD * nu[3:]])
+
+
+#: q -> conj(q_ned_enu) q conj(q_flu_frd), linear in q: the matrix, derived once (the plant
+#: converts its pose at every step for /tf).
+_TO_ENU = np.column_stack([quat_multiply(quat_multiply(_conjugate(_Q_NED_ENU), e),
+                                         _conjugate(_Q_FLU_FRD)) for e in np.eye(4)])
+
+
+def pose_ned_to_enu(position: ArrayLike, quaternion: ArrayLike
+                    ) -> tuple[FloatArray, FloatArray]:
+    """The pose of ``base_link_frd`` in ``odom_ned`` -> that of ``base_link`` in ``odom``
+    (position, quaternion (w, x, y, z)): the transform ``odom -> base_link``. Raises
+    ValueError for a quaternion that is zero or not finite."""
+    p = _NED_ENU.T @ np.asarray(position, dtype=float)
+    return p, _positive(_TO_ENU @ quat_normalize(quaternion))

@@ -5,7 +5,9 @@ messages): the nodes, the launcher, the bag tools, the analysis and the tests
 import them from here. Pure Python, no ROS.
 
 Topic names are relative (a namespace pushed on the stack applies to them),
-except ``/clock`` and ``/diagnostics``, which ROS keeps global.
+except ``/clock`` and ``/diagnostics``, which ROS keeps global, and ``/tf`` and
+``/tf_static``, which a namespaced stack remaps into its namespace
+(:data:`TF_REMAPPINGS`, as Nav2 does for several robots).
 """
 
 from __future__ import annotations
@@ -18,6 +20,9 @@ FRAME_BODY = 'base_link_frd'
 #: Their ENU/FLU siblings (REP-103, REP-105), as a robot's state estimator names them.
 FRAME_EARTH_ENU = 'odom'
 FRAME_BODY_FLU = 'base_link'
+#: The thrusters' links of the URDF (children of base_link_frd through the tilt joints;
+#: x along the thrust): thruster_1_link .. thruster_4_link.
+THRUSTER_LINKS = tuple(f'thruster_{i}_link' for i in range(1, 5))
 #: ``header.frame_id`` of a safety command that answers no wrench_cmd: the allocator's
 #: zero thrust (tilts held) while wrench_cmd is stale. Such a command is also stamped
 #: off the control-tick grid (ARCHITECTURE.md, "Time and stamps").
@@ -31,6 +36,8 @@ THRUSTERS = ('thruster_1', 'thruster_2', 'thruster_3', 'thruster_4')
 TILTS = ('tilt_front', 'tilt_rear')
 #: The servos as metrics and tables name them (same order as TILTS).
 SERVOS = ('front', 'rear')
+#: The URDF's joints of the second thruster of each pair, which mimic its tilt joint.
+TILT_MIMICS = ('tilt_front_thruster_2', 'tilt_rear_thruster_4')
 
 # --------------------------------------------------------------------------- DOFs
 
@@ -80,6 +87,16 @@ STACK_TOPICS: dict[str, str] = {
     DIAGNOSTICS: 'diagnostic_msgs/msg/DiagnosticArray',
     ROBOT_MARKERS: 'visualization_msgs/msg/MarkerArray',
 }
+
+#: The transform tree (REP-105), tf2_msgs/msg/TFMessage: odom -> base_link (and the
+#: thruster links) at every plant step, and the static relations, transient local.
+TF = '/tf'
+TF_STATIC = '/tf_static'
+TF_TOPICS: dict[str, str] = {TF: 'tf2_msgs/msg/TFMessage', TF_STATIC: 'tf2_msgs/msg/TFMessage'}
+#: ``-r`` remappings that keep a namespaced stack's tree in its namespace.
+TF_REMAPPINGS = ((TF, TF.lstrip('/')), (TF_STATIC, TF_STATIC.lstrip('/')))
+#: The URDF as robot_state_publisher publishes it (std_msgs/String, transient local).
+ROBOT_DESCRIPTION = 'robot_description'
 
 # --------------------------------------------------------------------------- nodes
 

@@ -32,6 +32,16 @@ FloatArray = NDArray[np.float64]
 #: m added to l, d around the thrusters, and the body's height (a drawing, not the model).
 BODY_MARGIN = (0.2, 0.1)
 BODY_HEIGHT = 0.25
+#: m: each thruster drawn as a cylinder (diameter, length) along its thrust.
+THRUSTER_SIZE = (0.09, 0.12)
+#: RGBA of the hull and of the thrusters: robot_markers and the URDF draw them alike.
+HULL_RGBA = (0.55, 0.6, 0.7, 0.6)
+THRUSTER_RGBA = (0.15, 0.15, 0.15, 1.0)
+
+
+def body_size(length: float, width: float) -> FloatArray:
+    """The hull's box (along the body's x, y, z), m, for thruster spacings l and d."""
+    return np.array([length + BODY_MARGIN[0], width + BODY_MARGIN[1], BODY_HEIGHT])
 
 
 @dataclass(frozen=True)
@@ -93,7 +103,7 @@ def robot_scene(position: ArrayLike, quaternion: ArrayLike, length: float, width
     achieved = np.asarray(wrench_achieved, dtype=float)
     return Scene(
         body_position=p, body_quaternion=q,
-        body_size=np.array([length + BODY_MARGIN[0], width + BODY_MARGIN[1], BODY_HEIGHT]),
+        body_size=body_size(length, width),
         thruster_positions=at,
         thruster_quaternions=np.array([quat_from_z(d) for d in directions]),
         thrust_actual=arrows(tilts, thrusts),

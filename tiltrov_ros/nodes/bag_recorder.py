@@ -10,10 +10,12 @@ Design points:
 * Throughput: each callback, after the message the executor took, takes the
   messages already queued on the same subscription (up to ``_DRAIN_LIMIT``),
   which keeps the executor's per-message overhead off the hot path.
-* The stack's topics (:data:`~tiltrov_ros.core.names.STACK_TOPICS`) are
-  subscribed at start-up, before their publishers exist, so the first message
-  of a run is recorded; other topics are found by polling the graph every
-  ``discovery_period`` seconds.
+* The stack's topics (:data:`~tiltrov_ros.core.names.STACK_TOPICS`) and the
+  transform tree's (``/tf``, and ``/tf_static`` transient local, as rosbag2
+  records it: a static transform published before the recorder started is
+  recorded too; when tf2_msgs is importable) are subscribed at start-up, before
+  their publishers exist, so the first message of a run is recorded; other
+  topics are found by polling the graph every ``discovery_period`` seconds.
 * Log time follows the node's clock. Without ``use_sim_time`` it is the time
   the middleware received the message (system time). With ``use_sim_time`` it
   is the value of the latest ``/clock`` message the recorder itself has taken,
@@ -48,7 +50,7 @@ from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 import rclpy.logging
 from rclpy.parameter import Parameter
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.subscription import Subscription
 from rosbags.interfaces import Connection
 
@@ -60,7 +62,7 @@ from tiltrov_ros.bag.qos import matches, subscription_qos, to_bag_qos
 from tiltrov_ros.bag.topics import is_hidden, normalize_type
 from tiltrov_ros.bag.writer import BagWriter
 from tiltrov_ros.core.errors import BagError, TiltrovError
-from tiltrov_ros.core.names import CLOCK, RECORDER, STACK_TOPICS
+from tiltrov_ros.core.names import CLOCK, RECORDER, STACK_TOPICS, TF_STATIC, TF_TOPICS
 from tiltrov_ros.core.timebase import cdr_stamp
 from tiltrov_ros.core.validation import InvalidInput, checked_stamp_ns
 
@@ -156,6 +158,11 @@ class BagRecorder(TiltrovNode):
                 # recorder while publishers with shallow queues keep sending.
                 message_definition(msgtype)
                 self._subscribe(name, msgtype, [])
+        for relative, msgtype in TF_TOPICS.items():
+            name = self.resolve_topic_name(relative)
+            if self._in_scope(name) and _importable(msgtype):
+                message_definition(msgtype)
+                self._subscribe(name, msgtype, [], latched=relative == TF_STATIC)
         if self._use_sim_time and self._clock_topic is None:
             self._subscribe(CLOCK, STACK_TOPICS[CLOCK], [], record=False)
 
@@ -178,9 +185,10 @@ class BagRecorder(TiltrovNode):
         return self.config.include_hidden or not is_hidden(name)
 
     def _subscribe(self, name: str, msgtype: str, publishers: Sequence[Any], *,
-                   record: bool = True) -> None:
+                   record: bool = True, latched: bool = False) -> None:
         """Create (or re-create) the raw subscription of ``name`` for ``publishers``
-        (the graph's endpoint infos, possibly none yet)."""
+        (the graph's endpoint infos, possibly none yet); ``latched``: transient local
+        before any publisher is known."""
         try:
             msg_class = message_class(msgtype)
         except BagError as exc:
@@ -191,6 +199,8 @@ class BagRecorder(TiltrovNode):
         qos = subscription_qos([p.qos_profile for p in publishers], self.config.queue_depth)
         if name == CLOCK and not record:
             qos.reliability = ReliabilityPolicy.BEST_EFFORT  # time only: match any /clock
+        if latched and not publishers:
+            qos.durability = DurabilityPolicy.TRANSIENT_LOCAL
         topic = self._topics.get(name)
         if topic is None:
             topic = _Topic(name, msgtype, qos, record)
@@ -430,6 +440,15 @@ class BagRecorder(TiltrovNode):
             self.get_logger().error(str(exc))
         finally:
             super().destroy_node()
+
+
+def _importable(msgtype: str) -> bool:
+    """``msgtype``'s Python class can be imported (tf2_msgs in a venv without it: no)."""
+    try:
+        message_class(msgtype)
+    except BagError:
+        return False
+    return True
 
 
 def main(args: list[str] | None = None) -> int:

@@ -32,6 +32,7 @@ from tiltrov_ros.core.names import (
     DIAGNOSTICS,
     FINAL_STATUS_KEY,
     KERNEL_WARMUP_KEY,
+    join_namespace,
 )
 from tiltrov_ros.core.paramtable import Param, ParamTable
 from tiltrov_ros.core.validation import InvalidInput
@@ -84,14 +85,18 @@ class SafePublisher:
     A message with a non-finite float is not published: the node counts it
     (``unsafe_outputs`` on /diagnostics, ERROR level), logs it, and publishes
     what ``safe(msg)`` returns instead (the node's safe command), if anything.
-    ``published`` counts the messages sent.
+    ``published`` counts the messages sent. ``topic`` is the name as given, or the
+    resolved one when a remapping moved it (``/tf`` in a namespaced stack), so that
+    ``published.<topic>`` on /diagnostics names the topic in the bag.
     """
 
     def __init__(self, node: TiltrovNode, msg_type: Any, topic: str, qos: QoSProfile,
                  safe: Callable[[Any], Any | None] | None = None) -> None:
         self.node = node
-        self.topic = topic
         self.publisher = node.create_publisher(msg_type, topic, qos)
+        resolved = self.publisher.topic_name
+        self.topic = (topic if join_namespace(node.get_namespace(), topic) == resolved
+                      else resolved)
         self._safe = safe
         self.published = 0
 

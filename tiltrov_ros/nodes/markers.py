@@ -21,28 +21,33 @@ cost lockstep more than building 17 markers ten times per simulated second
 from __future__ import annotations
 
 import functools
-import struct
 from typing import Any
 
 from geometry_msgs.msg import Point, WrenchStamped
 import numpy as np
-from rclpy.serialization import deserialize_message, serialize_message
 from visualization_msgs.msg import Marker, MarkerArray
 
 from tiltrov_ros.core.names import FRAME_EARTH, ROBOT_MARKERS, WRENCH_ACHIEVED, WRENCH_CMD
 from tiltrov_ros.core.plant import PlantSample
 from tiltrov_ros.core.validation import InvalidInput, check_finite
-from tiltrov_ros.core.visual import Scales, Scene, robot_scene
+from tiltrov_ros.core.visual import (
+    HULL_RGBA,
+    THRUSTER_RGBA,
+    THRUSTER_SIZE,
+    Scales,
+    Scene,
+    robot_scene,
+)
 
 from .base import TiltrovNode
 from .conversions import set_stamp, wrench_array
 from .qos import PUBLISHER_QOS, RELIABLE_QOS
+from .serialized import SerializedTemplate
 
-_GREY, _DARK = (0.55, 0.6, 0.7, 0.6), (0.15, 0.15, 0.15, 1.0)
 #: (namespace, count, type, RGBA) of the markers, in their order in the array.
 LAYOUT = (
-    ('body', 1, Marker.CUBE, _GREY),
-    ('thrusters', 4, Marker.CYLINDER, _DARK),
+    ('body', 1, Marker.CUBE, HULL_RGBA),
+    ('thrusters', 4, Marker.CYLINDER, THRUSTER_RGBA),
     ('thrust_actual', 4, Marker.ARROW, (1.0, 0.55, 0.0, 1.0)),
     ('thrust_commanded', 4, Marker.ARROW, (0.0, 0.75, 1.0, 0.6)),
     ('force_demanded', 1, Marker.ARROW, (0.9, 0.1, 0.1, 0.8)),
@@ -50,8 +55,7 @@ LAYOUT = (
     ('moment_demanded', 1, Marker.ARROW, (0.8, 0.1, 0.8, 0.8)),
     ('moment_achieved', 1, Marker.ARROW, (0.1, 0.6, 0.6, 0.8)),
 )
-#: m: thruster cylinders (diameter, length) and arrows (shaft and head diameters).
-THRUSTER_SIZE = (0.09, 0.12)
+#: m: arrows (shaft and head diameters).
 ARROW_SIZE = (0.02, 0.04)
 
 
@@ -132,68 +136,19 @@ def _scene_of(values: np.ndarray) -> Scene:
 
 
 class MarkerBytes:
-    """The serialized MarkerArray, rewritten in place for each scene.
-
-    rclpy converts 17 Marker objects field by field for every message (about
-    0.5 ms); here one template is serialized with a distinct sentinel in every
-    number that changes, the sentinels' byte offsets are found once, and each
-    message writes the new numbers there (a few microseconds). rclpy leaves the
-    CDR padding bytes as it finds them, so a sentinel could also show up in
-    padding: offsets are kept only when each sentinel occurs once and a check
-    message decodes to the one :func:`fill_markers` makes (else other sentinels
-    are tried).
-    """
+    """The serialized MarkerArray, rewritten in place for each scene
+    (:class:`~tiltrov_ros.nodes.serialized.SerializedTemplate`: a few microseconds
+    where rclpy's conversion of 17 Marker objects takes about 0.5 ms)."""
 
     def __init__(self) -> None:
-        for attempt in range(8):
-            if self._build(attempt) and self._checks_out():
-                return
-        raise RuntimeError('robot_markers: no unique offsets in the serialized template')
-
-    def _build(self, attempt: int) -> bool:
-        sentinels = (1 + 2 * attempt) * 1e6 + np.arange(_COUNT, dtype=float)
-        sec, nanosec = 0x5A5A0000 + 0x100 * attempt, 0x3A3A0000 + 0x100 * attempt
-        msg = fill_markers(new_marker_array(), 0, _scene_of(sentinels))
-        for i, m in enumerate(msg.markers):
-            m.header.stamp.sec, m.header.stamp.nanosec = sec + i, nanosec + i
-        template = serialize_message(msg)
-        n = len(msg.markers)
-        found = [self._offsets(template, [struct.pack('<d', v) for v in sentinels]),
-                 self._offsets(template, [struct.pack('<i', sec + i) for i in range(n)]),
-                 self._offsets(template, [struct.pack('<I', nanosec + i) for i in range(n)])]
-        if any(f is None for f in found):
-            return False
-        self._template = np.frombuffer(template, dtype=np.uint8).copy()
-        self._doubles, self._secs, self._nanosecs = found
-        return True
-
-    @staticmethod
-    def _offsets(blob: bytes, patterns: list[bytes]) -> np.ndarray | None:
-        """Byte indices of each pattern, as one flat array; None unless each occurs once."""
-        out = []
-        for pattern in patterns:
-            at = blob.find(pattern)
-            if at < 0 or blob.find(pattern, at + 1) >= 0:
-                return None
-            out.append(np.arange(at, at + len(pattern)))
-        return np.concatenate(out)
-
-    def _checks_out(self) -> bool:
-        values = np.linspace(-3.0, 3.0, _COUNT)
-        scene, ns = _scene_of(values), 1_234_567_890_123
-        expected = serialize_message(fill_markers(new_marker_array(), ns, scene))
-        return bool(deserialize_message(self.serialize(ns, scene), MarkerArray)
-                    == deserialize_message(expected, MarkerArray))
+        self._template = SerializedTemplate(
+            MarkerArray, lambda values, ns: fill_markers(new_marker_array(), ns,
+                                                         _scene_of(values)),
+            lambda msg: [m.header.stamp for m in msg.markers], _COUNT)
 
     def serialize(self, ns: int, scene: Scene) -> bytes:
         """The MarkerArray of ``scene`` stamped ``ns``, serialized."""
-        buf = self._template.copy()
-        buf[self._doubles] = scene_values(scene).astype('<f8').view(np.uint8)
-        sec, nanosec = divmod(ns, 1_000_000_000)
-        n = len(self._secs) // 4
-        buf[self._secs] = np.full(n, sec, dtype='<i4').view(np.uint8)
-        buf[self._nanosecs] = np.full(n, nanosec, dtype='<u4').view(np.uint8)
-        return buf.tobytes()
+        return self._template.serialize(ns, scene_values(scene))
 
 
 class RobotMarkers:

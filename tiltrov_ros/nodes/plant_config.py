@@ -62,6 +62,12 @@ PLANT_PARAMS = ParamTable('plant_simulator', [
           'robot_markers arrow lengths: per newton of thrust, per newton of force, per '
           'newton metre of moment', 'm/N, m/N, m/(N m)', size=3, low=0.0, high=10.0,
           read_only=True),
+    Param('tf', 'bool', True, 'publish the transform tree (REP-105): odom -> base_link on /tf '
+          "at every step with the odometry's stamp, odom -> odom_ned and base_link -> "
+          'base_link_frd on /tf_static (transient local)', read_only=True),
+    Param('tf_thrusters', 'bool', True, 'with tf: also the thruster links (base_link_frd -> '
+          'thruster_i_link at the actual tilts) on /tf and the URDF on robot_description, '
+          "robot_state_publisher's work where it does not run", read_only=True),
 ])
 #: Parameters whose defaults are the scenario's (declared once the scenario is known).
 _FROM_SCENARIO = ('com_error', 'current')
@@ -87,6 +93,8 @@ class PlantConfig:
     command_timeout: float = 0.5     # s, sim time; 0: off
     markers_period_ns: int = 0                      # robot_markers; 0: none
     marker_scales: Scales = field(default_factory=Scales)
+    tf: bool = True                                 # /tf and /tf_static
+    tf_thrusters: bool = True                       # the thruster links, robot_description
     failed_thrusters: tuple[int, ...] = ()          # indices 0..3 (parameter)
     faults: tuple[ThrusterFault, ...] = ()          # the scenario's
 
@@ -135,4 +143,5 @@ def declare_parameters(node: TiltrovNode) -> PlantConfig:
         stall_timeout=v['stall_timeout'], startup_subscribers=v['startup_subscribers'],
         startup_delay=v['startup_delay'], command_timeout=v['command_timeout'],
         markers_period_ns=markers_ns, marker_scales=Scales(*v['marker_scales']),
+        tf=v['tf'], tf_thrusters=v['tf_thrusters'],
         failed_thrusters=failed, faults=scenario.faults if scenario is not None else ())

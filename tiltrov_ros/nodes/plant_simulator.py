@@ -4,8 +4,8 @@ Subscribes ``thrust_cmd`` (thruster_1..4, effort N) and ``tilt_cmd``
 (tilt_front, tilt_rear, position rad) and hands them to the actuator models
 (``Plant.command``); publishes at every plant step, stamped with the sim time
 t_i in integer ns (the first message is the initial state at t = 0):
-``/clock``, then ``joint_states``, then ``odom``, and every ``markers_period``
-``robot_markers`` (nodes/markers.py). The clock first: a node on
+``/clock``, then ``joint_states``, then ``odom``, then ``/tf`` (nodes/transforms.py),
+and every ``markers_period`` ``robot_markers`` (nodes/markers.py). The clock first: a node on
 sim time has its clock at t_i when the state stamped t_i arrives (its stamp
 checks and a recorder's log times are then exact, docs/bags.md), the
 reference publisher answers the clock while the state is on its way, and the
@@ -95,6 +95,7 @@ from .markers import RobotMarkers
 from .parameters import Overrides
 from .plant_config import declare_parameters
 from .qos import PUBLISHER_QOS, RELIABLE_QOS
+from .transforms import robot_transforms
 
 #: joint_states value of a field a joint does not have (thruster position and
 #: velocity, servo effort): 0.0, since no topic carries NaN (docs/reliability.md).
@@ -137,6 +138,8 @@ class PlantSimulator(TiltrovNode):
         c = self.config
         self.markers = (RobotMarkers(self, c.robot.length, c.robot.width, c.markers_period_ns,
                                      c.marker_scales) if c.markers_period_ns else None)
+        self.transforms = robot_transforms(self, c.robot, self.plant.time_ns, tf=c.tf,
+                                           thrusters=c.tf_thrusters)
         self._odom_msg = new_odometry()
         self._joint_msg = new_joint_state(TILTS + THRUSTERS)
         self._clock_msg = ClockMsg()
@@ -196,6 +199,8 @@ class PlantSimulator(TiltrovNode):
         self._joint_pub.publish(self._joint_msg)
         self._odom_pub.publish(fill_odometry(self._odom_msg, ns, s.position, s.quaternion,
                                              s.nu))
+        if self.transforms is not None:
+            self.transforms.publish(s)
         if self.markers is not None and self.markers.due(ns):
             self.markers.publish(s, self.plant.thrusters.command_held,
                                  self.plant.servos.command_held)
@@ -406,9 +411,10 @@ class PlantSimulator(TiltrovNode):
                                         for sub in self._command_subs)
 
     def _state_readers(self) -> tuple[int, ...]:
-        """Readers matched on each writer of the state (odom, joint_states, /clock)."""
-        return tuple(pub.get_subscription_count()
-                     for pub in (self._odom_pub, self._joint_pub, self._clock_pub))
+        """Readers matched on each writer of the state (odom, joint_states, /clock, /tf)."""
+        pubs = (self._odom_pub, self._joint_pub, self._clock_pub)
+        tf = () if self.transforms is None else (self.transforms.publisher,)
+        return tuple(pub.get_subscription_count() for pub in pubs + tf)
 
     # -- realtime --------------------------------------------------------------------
 

@@ -40,6 +40,12 @@ PUBLISHER_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
 CLOCK_READER_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
                               durability=DurabilityPolicy.VOLATILE,
                               history=HistoryPolicy.KEEP_LAST, depth=100)
+#: Written once and kept for every reader, late ones too (``/tf_static``,
+#: ``robot_description``): reliable, transient local, the last sample, as tf2's static
+#: broadcaster and robot_state_publisher offer them.
+LATCHED_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                         history=HistoryPolicy.KEEP_LAST, depth=1)
 #: Readers that only want the latest sample (realtime odometry).
 SENSOR_QOS = qos_profile_sensor_data
 

@@ -17,7 +17,7 @@ from tiltrov_ros.core.names import (
     RECORDER,
 )
 
-from .specs import NodeSpec
+from .specs import NodeSpec, remap_args
 from .supervisor import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, Output, StatusFile
 
 
@@ -27,6 +27,7 @@ def build_node(spec: NodeSpec, context: Any, namespace: str = '') -> Any:
     cli_args = ['--ros-args']
     for path in spec.params_files:
         cli_args += ['--params-file', str(path)]
+    cli_args += remap_args(namespace)
     kwargs = {'context': context, 'cli_args': cli_args,
               'parameter_overrides': spec.all_overrides()}
     if namespace:

@@ -9,6 +9,13 @@ numbers of ``tiltrov launch`` and ``tiltrov sim``. Arguments::
     mode:=lockstep|realtime  real_time_factor:=1.0  duration:=SEC
     namespace:=NS  record:=DIR  markers:=true|false
 
+Where robot_state_publisher is installed (a ROS install) it is started too,
+with the URDF of the robot in use (:func:`~tiltrov_ros.core.robot_description.robot_urdf`:
+the scenario's robot overrides applied) as ``robot_description``, and it
+publishes the thruster links from ``joint_states`` instead of the plant
+(``tf_thrusters: false``). In a namespace every node's ``/tf`` and ``/tf_static``
+are remapped into it (:func:`.specs.remap_args`).
+
 The run ends as ``tiltrov launch`` ends it: when the plant reaches
 ``duration`` it exits (code 0), the other nodes are stopped (SIGINT), then the
 recorder, which closes its bag; then the launch ends with code 0. A node that
@@ -21,6 +28,7 @@ Imported only by the launch file: ``launch`` and ``launch_ros`` come with ROS
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 import shutil
 import tempfile
@@ -39,12 +47,24 @@ from launch.events.process import ProcessExited, ShutdownProcess
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-from tiltrov_ros.core.names import LOCKSTEP, MODES, PLANT, RECORDER, normalize_namespace
+from tiltrov_ros.core.names import (
+    LOCKSTEP,
+    MODES,
+    PLANT,
+    RECORDER,
+    TF_REMAPPINGS,
+    normalize_namespace,
+)
+from tiltrov_ros.core.robot_description import robot_urdf
+from tiltrov_ros.core.runner import StackConfig
+from tiltrov_ros.core.timebase import NS_PER_S
 
 from .specs import LaunchError, LaunchOptions, NodeSpec, namespaced_config, stack_specs
 from .supervisor import RECORDER_STOP_TIMEOUT
 
 PACKAGE = 'tiltrov_ros'
+#: The package (and executable) that publishes a URDF's links from joint_states.
+ROBOT_STATE_PUBLISHER = 'robot_state_publisher'
 
 #: name -> (default, description) of the launch arguments.
 ARGUMENTS = {
@@ -92,7 +112,10 @@ def options_from(values: dict[str, str]) -> LaunchOptions:
 def _stack(context: LaunchContext) -> list[Any]:
     values = {name: LaunchConfiguration(name).perform(context) for name in ARGUMENTS}
     options = options_from(values)
-    specs, _, _ = stack_specs(options)
+    rsp = robot_state_publisher_installed()
+    if rsp:
+        options = replace(options, tf_thrusters=False)
+    specs, config, _ = stack_specs(options)
     namespace = normalize_namespace(options.namespace)
     actions: list[Any] = []
     if namespace:
@@ -103,6 +126,8 @@ def _stack(context: LaunchContext) -> list[Any]:
         actions.append(RegisterEventHandler(OnShutdown(
             on_shutdown=lambda *_: shutil.rmtree(workdir, ignore_errors=True))))
     nodes = {spec.name: _node(spec, namespace) for spec in specs}
+    if rsp:
+        nodes[ROBOT_STATE_PUBLISHER] = _robot_state_publisher(config, namespace)
     watcher = _EndOfRun(nodes)
     actions += list(nodes.values())
     actions += [RegisterEventHandler(OnProcessExit(target_action=node, on_exit=watcher.exited))
@@ -115,7 +140,31 @@ def _node(spec: NodeSpec, namespace: str) -> Node:
     return Node(package=PACKAGE, executable=spec.name, name=spec.name,
                 namespace=namespace or None, output='screen',
                 parameters=[*(str(path) for path in spec.params_files), spec.all_overrides()],
-                **extra)
+                remappings=list(TF_REMAPPINGS) if namespace else None, **extra)
+
+
+def robot_state_publisher_installed() -> bool:
+    """robot_state_publisher is in the ament index (a ROS install; not the venv)."""
+    try:
+        from ament_index_python.packages import get_package_share_directory
+        get_package_share_directory(ROBOT_STATE_PUBLISHER)
+    except (ImportError, LookupError, ValueError, OSError):
+        return False
+    return True
+
+
+def robot_state_publisher_parameters(config: StackConfig) -> dict[str, Any]:
+    """The URDF of the robot in use, sim time, and the thruster links at every
+    ``joint_states`` (the plant step: the odometry's rate; its default is 20 Hz)."""
+    return {'robot_description': robot_urdf(config.robot), 'use_sim_time': True,
+            'publish_frequency': NS_PER_S / config.step_ns}
+
+
+def _robot_state_publisher(config: StackConfig, namespace: str) -> Node:
+    return Node(package=ROBOT_STATE_PUBLISHER, executable=ROBOT_STATE_PUBLISHER,
+                namespace=namespace or None, output='screen',
+                parameters=[robot_state_publisher_parameters(config)],
+                remappings=list(TF_REMAPPINGS) if namespace else None)
 
 
 class _EndOfRun:

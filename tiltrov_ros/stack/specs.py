@@ -27,6 +27,7 @@ from tiltrov_ros.core.names import (
     RECORDER,
     REFERENCE,
     STACK_NODES,
+    TF_REMAPPINGS,
     join_namespace,
     normalize_namespace,
 )
@@ -65,6 +66,7 @@ class LaunchOptions:
     status_file: Path | None = None        # the launch's state as JSON (StatusFile)
     launcher: str = 'tiltrov launch'       # what started the run (the bag's run_info)
     markers: bool = True                   # the plant publishes robot_markers
+    tf_thrusters: bool = True              # False: robot_state_publisher publishes them
 
 
 @dataclass(frozen=True)
@@ -109,11 +111,20 @@ class NodeSpec:
         args = ['--ros-args']
         if namespace:
             args += ['-r', f'__ns:={namespace}']
+        args += remap_args(namespace)
         for path in self.params_files:
             args += ['--params-file', str(path)]
         if overrides_file is not None:
             args += ['--params-file', str(overrides_file)]
         return args
+
+
+def remap_args(namespace: str) -> list[str]:
+    """``-r`` arguments of a node in ``namespace``: ``/tf`` and ``/tf_static`` moved into
+    it (each stack its own tree, as Nav2 does for several robots); none at the root."""
+    if not namespace:
+        return []
+    return [arg for old, new in TF_REMAPPINGS for arg in ('-r', f'{old}:={new}')]
 
 
 def resolve(options: LaunchOptions) -> tuple[StackConfig, float]:
@@ -173,6 +184,8 @@ def stack_specs(options: LaunchOptions, *, config_dir: Path | None = None,
         plant['stall_timeout'] = float(options.stall_timeout)
     if not options.markers:
         plant['markers_period'] = 0.0
+    if not options.tf_thrusters:
+        plant['tf_thrusters'] = False
     controller = {'controller': kind, 'mode': mode, **sim, **robot}
     allocator: dict[str, Any] = {
         'tilt_request': 'required' if kind == 'switching' else 'ignored',

@@ -1,0 +1,62 @@
+"""The rclpy harness of the tests: one context with its nodes and executor.
+
+In a module of its own (test/ is on sys.path) so that a test can build one for a
+module-scoped fixture; ``conftest.py`` gives each test its own (``ros``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+import time
+from typing import Any
+
+
+class RosHarness:
+    """One rclpy context with its nodes and executor, for a single test."""
+
+    def __init__(self) -> None:
+        import rclpy
+        from rclpy.context import Context
+        from rclpy.executors import SingleThreadedExecutor
+
+        self._rclpy = rclpy
+        self.context = Context()
+        rclpy.init(context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.nodes: list[Any] = []
+
+    def add(self, node: Any) -> Any:
+        """Register a node built with ``context=harness.context``; return it."""
+        self.nodes.append(node)
+        self.executor.add_node(node)
+        return node
+
+    def node(self, name: str, **kwargs: Any) -> Any:
+        """Create a plain rclpy node bound to this context."""
+        return self.add(self._rclpy.create_node(name, context=self.context, **kwargs))
+
+    def spin_until(self, predicate: Callable[[], bool], timeout: float = 10.0,
+                   step: float = 0.01) -> bool:
+        """Spin until ``predicate()`` is true or ``timeout`` wall seconds pass.
+
+        Returns the last value of the predicate, so tests ``assert`` on it.
+        """
+        deadline = time.monotonic() + timeout
+        while not predicate():
+            if time.monotonic() > deadline:
+                return bool(predicate())
+            self.executor.spin_once(timeout_sec=step)
+        return True
+
+    def spin_for(self, seconds: float, step: float = 0.01) -> None:
+        """Spin for a fixed wall-clock duration (to let late messages arrive)."""
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            self.executor.spin_once(timeout_sec=step)
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        for node in reversed(self.nodes):
+            node.destroy_node()
+        self.nodes.clear()
+        self._rclpy.try_shutdown(context=self.context)
