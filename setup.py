@@ -52,7 +52,7 @@ setup(
         # figures of the summary.
         'campaign': ['dask>=2024.8', 'distributed>=2024.8', 'matplotlib>=3.8'],
         # Everything `make test` needs besides the ROS wheels.
-        'dev': ['pytest>=8', 'pytest-timeout>=2.3', 'hypothesis>=6.100',
+        'dev': ['pytest>=8', 'pytest-timeout>=2.3', 'pytest-xdist>=3.5', 'hypothesis>=6.100',
                 'ruff>=0.6', 'mypy>=1.10', 'types-PyYAML',
                 'colcon-common-extensions>=0.3'],
     },

@@ -280,30 +280,38 @@ def test_tiltrov_warmup_names_the_backend_the_cache_and_each_group() -> None:
                                          'nothing to compile: the numpy reference runs']
 
 
-def test_the_cache_is_keyed_by_the_sources_of_the_core(tmp_path: Path) -> None:
-    """An edit anywhere in the core (a kernel called by another, a constant it imports)
-    gives another cache directory, and the stale one is removed: numba itself checks a
-    cached kernel against its own file only, and once ran an edited callee's old code
-    inside a cached caller."""
-    install = _copy_package(tmp_path / 'install')
-    env = _env(PYTHONPATH=str(install))
+def test_the_cache_is_keyed_by_the_sources_and_shared_by_their_installs(
+        tmp_path: Path) -> None:
+    """Two installs of the same sources in two places share one cache: the second loads
+    what the first compiled (before, numba keyed it by the absolute path, and a colcon
+    workspace compiled everything again in its nodes' constructors, 74 s once). An edit
+    anywhere in the core (here a kernel that others call) gives another key: numba
+    itself checks a cached kernel against its own file only, and once ran an edited
+    callee's old code inside a cached caller."""
+    home = tmp_path / 'home'
+    home.mkdir()
+    env = _env(HOME=str(home))
     code = ('import json\nfrom tiltrov_ros.core import jit\n'
-            'print(json.dumps([jit.backend(), jit.describe()["cache_dir"], jit.source_key()]))\n')
+            'with jit.compilations() as done:\n'
+            '    jit.warmup(["control"])\n'
+            'print(json.dumps([jit.backend(), jit.describe()["cache_dir"], len(done)]))\n')
 
-    def cache_dir() -> tuple[str, Path, str]:
-        result = subprocess.run([sys.executable, '-c', code], env=env, capture_output=True,
-                                text=True, timeout=120, cwd=tmp_path)
+    def warm(install: Path) -> tuple[str, Path, int]:
+        result = subprocess.run([sys.executable, '-c', code], env=dict(
+            env, PYTHONPATH=str(install)), capture_output=True, text=True, timeout=300,
+            cwd=tmp_path)
         assert result.returncode == 0, result.stderr
-        name, directory, key = _last_json(result.stdout)
-        return name, Path(directory) if directory else Path(), key
+        name, directory, compiled = _last_json(result.stdout)
+        return name, Path(directory or '.'), compiled
 
-    name, first, key = cache_dir()
+    first, second = _copy_package(tmp_path / 'a'), _copy_package(tmp_path / 'b')
+    name, cache, compiled = warm(first)
     if name != 'numba':
         pytest.skip('numba is not installed: no kernel cache')
-    in_package = install / 'tiltrov_ros' / 'core' / '__pycache__' / 'numba'
-    assert first.name == key and first.parent == in_package
-    callee = install / 'tiltrov_ros' / 'core' / 'allocation' / 'kernels' / 'limits.py'
+    assert cache.parent == home / '.cache' / 'tiltrov_ros' / 'numba' and compiled > 0
+    assert warm(second) == (name, cache, 0)           # loaded, not compiled again
+    callee = second / 'tiltrov_ros' / 'core' / 'kinematics.py'
     callee.write_text(callee.read_text() + '\n# edited\n')
-    _, second, key2 = cache_dir()
-    assert key2 != key and second.parent == first.parent and second.is_dir()
-    assert not first.exists()
+    _, edited, compiled = warm(second)
+    assert edited != cache and edited.parent == cache.parent and compiled > 0
+    assert warm(first) == (name, cache, 0)            # the first install's cache was kept

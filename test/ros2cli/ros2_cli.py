@@ -35,15 +35,26 @@ _DDS_LOG = re.compile(r'^\d{4}-\d\d-\d\d \d\d:\d\d:\d\d\.\d+ \[\w+ (Error|Warnin
 _ANSI = re.compile(r'\x1b\[[0-9;]*m')
 
 
-def without_dds_log(result: subprocess.CompletedProcess[str]
-                    ) -> subprocess.CompletedProcess[str]:
-    """``result`` with Fast DDS's log lines moved from stdout to stderr: the command's
-    own output is what the user reads and what the tests compare."""
-    kept, moved = [], []
-    for line in result.stdout.splitlines(keepends=True):
-        (moved if _DDS_LOG.match(_ANSI.sub('', line)) else kept).append(line)
-    return subprocess.CompletedProcess(result.args, result.returncode, ''.join(kept),
-                                       ''.join(moved) + result.stderr)
+class Ran(subprocess.CompletedProcess[str]):
+    """A finished command, with Fast DDS's own log lines apart (``dds_log``)."""
+
+    dds_log = ''
+
+
+def without_dds_log(result: subprocess.CompletedProcess[str]) -> Ran:
+    """``result`` without Fast DDS's log lines on stdout and stderr (kept in
+    ``dds_log``): the command's own output is what the user reads and what the tests
+    compare. Those lines say what the machine's other DDS processes do to this one (a
+    shared-memory port another process holds), whatever the command."""
+    streams, moved = [], []
+    for text in (result.stdout, result.stderr):
+        kept = []
+        for line in (text or '').splitlines(keepends=True):
+            (moved if _DDS_LOG.match(_ANSI.sub('', line)) else kept).append(line)
+        streams.append(''.join(kept))
+    ran = Ran(result.args, result.returncode, streams[0], streams[1])
+    ran.dds_log = ''.join(moved)
+    return ran
 
 
 #: ros2 verbs that look at the graph (through the daemon, unless --no-daemon).

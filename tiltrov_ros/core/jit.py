@@ -26,15 +26,17 @@ runs and that manages numba:
   use.
 * :func:`compilations` -- a context manager listing what numba compiles
   meanwhile (the tests' proof that nothing compiles after construction).
-* The cache: in the package (``core/__pycache__/numba``) when it is writable (a
-  checkout, a venv); in a read-only install (a colcon install space under
-  /opt, a system site-packages) in ``$XDG_CACHE_HOME/tiltrov_ros/numba``
-  (``~/.cache/...``), else in the temporary directory; each in a subdirectory
-  named by a hash of the core's sources (:func:`source_key`). numba checks a
-  cached kernel against its own file only, not against the kernels it calls in
-  other modules (nor the constants it imports): an edited callee left a stale
-  caller in the cache. A new key starts a fresh cache; older keys are removed.
-  ``NUMBA_CACHE_DIR`` set by the user always wins, as it is.
+* The cache: ``$XDG_CACHE_HOME/tiltrov_ros/numba`` (``~/.cache/...``), else the
+  temporary directory, in a subdirectory named by a hash of the core's sources
+  (:func:`source_key`; the :data:`KEPT_KEYS` most recently used are kept). Each
+  kernel is cached by its place in the package and stamped with that hash
+  (:func:`_package_locator`): numba's own cache checks a kernel against its own
+  file only, not against the kernels it calls in other modules (an edited
+  callee once left a stale caller in the cache), and keys it by its absolute
+  path (a colcon install of the same sources compiled everything again). So a
+  checkout, its colcon workspace and a read-only install share one cache, and
+  an install space never needs to be writable. ``NUMBA_CACHE_DIR`` set by the
+  user wins, as it is.
 """
 
 from __future__ import annotations
@@ -91,13 +93,6 @@ class Registered:
 _STATE = _State()
 
 
-def _writable(directory: Path) -> bool:
-    """True when numba could write its cache beside sources in ``directory``."""
-    cache = directory / '__pycache__'
-    target = cache if cache.is_dir() else directory
-    return os.access(target, os.W_OK | os.X_OK)
-
-
 def _user_cache_dir() -> str:
     """A writable directory for the cache when the package directory is not."""
     base = os.environ.get('XDG_CACHE_HOME') or os.path.join(os.path.expanduser('~'), '.cache')
@@ -123,32 +118,91 @@ def source_key() -> str:
     return digest.hexdigest()[:16]
 
 
+#: Source keys whose caches are kept in the default cache directory (several checkouts
+#: of different versions on one machine each keep theirs).
+KEPT_KEYS = 4
+
+
 def _keyed(base: Path) -> str:
-    """``base/<source key>``, created; the other keys' directories in ``base`` removed
-    (best effort: a cache another checkout still uses is rebuilt there next time)."""
+    """``base/<source key>``, created and marked as used; beyond the :data:`KEPT_KEYS`
+    most recently used keys, the others' directories are removed."""
     key = source_key()
     directory = base / key
     directory.mkdir(parents=True, exist_ok=True)
-    for other in base.iterdir():
-        if other.name != key and other.is_dir() and len(other.name) == len(key):
-            shutil.rmtree(other, ignore_errors=True)
+    os.utime(directory)
+    others = sorted((d for d in base.iterdir() if d.is_dir() and d.name != key
+                     and len(d.name) == len(key)), key=lambda d: d.stat().st_mtime)
+    for other in others[:max(0, len(others) - (KEPT_KEYS - 1))]:
+        shutil.rmtree(other, ignore_errors=True)
     return str(directory)
 
 
 def _configure_cache() -> str:
     """Point numba's cache somewhere writable, keyed by the sources, before numba is
-    imported."""
-    if os.environ.get('NUMBA_CACHE_DIR'):
-        return os.environ['NUMBA_CACHE_DIR']
-    core = _PACKAGE_DIR / 'core'
-    if _writable(core):
-        directory = _keyed(core / '__pycache__' / 'numba')
-    else:
-        directory = _keyed(Path(_user_cache_dir()))
+    imported: ``NUMBA_CACHE_DIR`` as the user set it, else the user's cache directory."""
+    directory = os.environ.get('NUMBA_CACHE_DIR') or _keyed(Path(_user_cache_dir()))
     os.environ['NUMBA_CACHE_DIR'] = directory
-    if 'numba' in sys.modules:                       # imported before us: tell it directly
-        sys.modules['numba'].config.CACHE_DIR = directory
+    numba = sys.modules.get('numba')
+    if numba is not None:                            # imported before us: tell it directly
+        numba.config.CACHE_DIR = directory
     return directory
+
+
+def _install_locator() -> None:
+    """Cache this package's kernels by their place in the package and the core's source
+    key (:class:`_PackageLocator`), ahead of numba's own locators."""
+    try:
+        from numba.core import caching
+        impl = caching.CacheImpl
+        base = caching._CacheLocator
+    except (ImportError, AttributeError):      # another numba: its own locators (keyed dir)
+        return
+    classes: list[Any] = impl._locator_classes
+    if not any(getattr(c, '__name__', '') == '_PackageLocator' for c in classes):
+        classes.insert(0, _package_locator(base))
+
+
+def _package_locator(base: type) -> type:
+    """numba's cache locator for the kernels of this package.
+
+    numba keys a cached kernel by its file's absolute path and checks it against that
+    file's contents only. This locator keys it by its path inside the package and
+    stamps it with :func:`source_key`: the same sources installed elsewhere (a colcon
+    workspace, a read-only install) load the kernels compiled from a checkout, and a
+    change anywhere in the core (a callee in another module, an imported constant)
+    makes every cached kernel stale.
+    """
+    stamp = source_key()
+
+    class _PackageLocator(base):  # type: ignore[misc]
+        def __init__(self, py_func: Any, py_file: str, relative: Path) -> None:
+            self._lineno = py_func.__code__.co_firstlineno
+            self._cache_path = os.path.join(sys.modules['numba'].config.CACHE_DIR,
+                                            *relative.parent.parts)
+
+        def get_cache_path(self) -> str:
+            return self._cache_path
+
+        def get_source_stamp(self) -> str:
+            return stamp
+
+        def get_disambiguator(self) -> str:
+            return str(self._lineno)
+
+        @classmethod
+        def from_function(cls, py_func: Any, py_file: str) -> Any:
+            try:
+                relative = Path(py_file).resolve().relative_to(_PACKAGE_DIR)
+            except (OSError, ValueError):
+                return None                      # not a kernel of this package
+            locator = cls(py_func, py_file, relative)
+            try:
+                locator.ensure_cache_path()
+            except OSError:
+                return None
+            return locator
+
+    return _PackageLocator
 
 
 def backend() -> str:
@@ -167,6 +221,7 @@ def backend() -> str:
     try:
         _STATE.cache_dir = _configure_cache()
         import numba
+        _install_locator()
     except (ImportError, OSError) as exc:
         if wanted == 'numba':
             raise ImportError(f'{BACKEND_ENV}=numba but the compiled kernels cannot be '
