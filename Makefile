@@ -13,7 +13,7 @@ OUT    ?= runs/demo
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export MPLBACKEND ?= Agg
 
-.PHONY: install tf2-msgs ros2-cli demo test lint typecheck bench bench-all soak figures docs campaign clean help
+.PHONY: install tf2-msgs ros2-cli demo test test-fast lint typecheck bench bench-all soak figures docs campaign clean help
 
 # The real ros2 command line (ros2cli, launch, launch_ros as wheels, with an install.sh)
 # for the tests that drive the package as a ROS user does: installed into .venv by
@@ -23,6 +23,7 @@ TILTROV_ROS2_CLI ?= ../shared/ros2-cli
 help:
 	@echo "make demo     run the full stack on the paper's positioning scenario (bag, figures, metrics)"
 	@echo "make test     lint, type-check and run the whole test suite"
+	@echo "make test-fast the core and analysis tests without ROS and without the slow ones"
 	@echo "make install  create .venv with rclpy (ROS 2 Jazzy wheels) and this package"
 	@echo "make tf2-msgs build tf2_msgs (/tf) into .venv again (make install does it once)"
 	@echo "make ros2-cli add the ros2 command line to .venv (from TILTROV_ROS2_CLI, if present)"
@@ -73,8 +74,16 @@ lint: $(STAMP)
 	$(VENV)/bin/mypy
 
 # Tests run derandomized (the same Hypothesis examples every run): see test/conftest.py.
+# On TEST_WORKERS workers (pytest-xdist), each with its own DDS domain; test/conftest.py
+# says which tests share a worker.
+TEST_WORKERS ?= 2
+PYTEST := TILTROV_HYPOTHESIS_PROFILE=ci $(VENV)/bin/pytest -n $(TEST_WORKERS) --dist loadgroup
 test: lint $(TF2_STAMP)
-	TILTROV_HYPOTHESIS_PROFILE=ci $(VENV)/bin/pytest
+	$(PYTEST)
+
+# The edit loop: the core and the analysis, no ROS process, not the slow tests.
+test-fast: $(STAMP)
+	$(PYTEST) -q -m 'not slow' test/core test/analysis
 
 bench: $(STAMP)
 	$(VENV)/bin/tiltrov bench targets

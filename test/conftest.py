@@ -27,8 +27,9 @@ from harness import RosHarness
 from hypothesis import settings
 import pytest
 
-if 'TILTROV_TEST_DOMAIN_ID' not in os.environ:
-    # A nested session (a test that runs pytest or colcon test) inherits its parent's.
+if 'TILTROV_TEST_DOMAIN_ID' not in os.environ or os.environ.get('PYTEST_XDIST_WORKER'):
+    # A nested session (a test that runs pytest or colcon test) inherits its parent's;
+    # each worker of a parallel run (pytest-xdist) takes its own, not its master's.
     _domain, _domain_lock = claim_domain()      # the lock is held open for the session
     os.environ['TILTROV_TEST_DOMAIN_ID'] = str(_domain)
 os.environ['ROS_DOMAIN_ID'] = os.environ['TILTROV_TEST_DOMAIN_ID']
@@ -70,3 +71,26 @@ def colcon_workspace(tmp_path_factory: pytest.TempPathFactory) -> Any:
     (:func:`workspace.build_workspace`)."""
     from workspace import build_workspace
     return build_workspace(tmp_path_factory.mktemp('ws'))
+
+
+#: ``make test`` runs the suite on two workers (pytest-xdist, ``--dist loadgroup``),
+#: each with its own DDS domain. Every file runs whole on one worker (its module and
+#: session fixtures are built once) and a folder whose tests share a session fixture
+#: stays together, except these files: long tests that share nothing, spread over the
+#: workers one by one.
+SPREAD = frozenset({'test/test_kernels_start.py', 'test/stack/test_reliability.py',
+                    'test/stack/test_launch.py', 'test/core/test_allocation_optimum.py'})
+TOGETHER = ('test/ros2cli/', 'test/campaign/')
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    for item in items:
+        path = Path(str(item.fspath)).resolve()
+        try:
+            name = path.relative_to(REPO_ROOT).as_posix()
+        except ValueError:
+            continue
+        if name in SPREAD:
+            continue
+        group = next((folder for folder in TOGETHER if name.startswith(folder)), name)
+        item.add_marker(pytest.mark.xdist_group(group))
