@@ -148,7 +148,7 @@ class TiltrovNode(InputGuard, Node):
     #: source then drops them without counting them a second time).
     reads_clock: ClassVar[bool] = False
     #: The compiled-kernel groups the node calls (core/jit.py): compiled or loaded in the
-    #: constructor, blocking, before anything subscribes, so that no tick waits for a
+    #: constructor, blocking, before the node joins the graph, so that no tick waits for a
     #: compiler (and none runs the reference first and the kernels later).
     kernel_groups: ClassVar[tuple[str, ...]] = ()
 
@@ -156,11 +156,13 @@ class TiltrovNode(InputGuard, Node):
                  context: Context | None = None, cli_args: Sequence[str] | None = None,
                  parameter_overrides: Overrides = None) -> None:
         overrides = as_parameters(parameter_overrides)
+        #: s: this constructor's compiling or loading of its kernels (/diagnostics). Before
+        #: the node exists: it appears in the graph once it can answer (a launch that saw
+        #: it and was stopped at once found it busy loading, deaf to SIGINT for seconds).
+        self.kernel_warmup = jit.warmup(self.kernel_groups) if self.stack_node else 0.0
         super().__init__(node_name, namespace=namespace, context=context,
                          cli_args=list(cli_args) if cli_args is not None else None,
                          parameter_overrides=overrides)
-        #: s: this constructor's compiling or loading of its kernels (/diagnostics).
-        self.kernel_warmup = jit.warmup(self.kernel_groups) if self.stack_node else 0.0
         #: The process-wide arguments, then the node's own: parameter files and -p
         #: values apply in this order (later ones win) and errors name the file.
         self._source_args = [*init_args(self.context), *(cli_args or ())]
