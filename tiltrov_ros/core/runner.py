@@ -337,6 +337,10 @@ class StackConfig:
             'tilt_max': self.robot.tilt_max,
             'tilt_rate_limit': self.robot.tilt_rate_limit,
             'backend': jit.backend(),
+            # What the steady-wrench oracle of the metrics needs (core/steady.py).
+            'robot': self.robot.as_dict(),
+            'disturbances': self.scenario.disturbances.describe(),
+            'allocator_weights': list(self.allocator.weights),
         }
 
 
