@@ -24,7 +24,8 @@ static test answers; the campaign's counterfactual run does
 (docs/campaign.md, "Verdicts").
 
 The result's ``ratio`` is the largest shortfall in units of its tolerance:
-at most 1 means attainable.
+at most 1 means attainable. :class:`HoldMonitor` asks the same of the demand
+the allocator sees, live (the ``thrust_allocator`` node's ``/diagnostics``).
 """
 
 from __future__ import annotations
@@ -50,6 +51,7 @@ from tiltrov_ros.core.dynamics import (
     restoring_forces,
 )
 from tiltrov_ros.core.kinematics import Rquat, quat_normalize
+from tiltrov_ros.core.names import WRENCH_DOFS
 from tiltrov_ros.core.params import RobotParams
 
 FloatArray = NDArray[np.float64]
@@ -113,29 +115,44 @@ class SteadyVerdict:
         return 'servo_range' if self.full_circle.attainable else 'physics'
 
 
-def attainable(robot: RobotParams, wrench: ArrayLike, tilt_limits: tuple[float, float],
-               weights: Sequence[float] = DEFAULT_WEIGHTS,
-               fraction: float = SHORTFALL_FRACTION) -> Attainable:
-    """The best configuration for ``wrench`` over every tilt in ``tilt_limits`` and
-    every thrust within the limit (the robust allocator without ``previous``)."""
-    tau = np.asarray(wrench, dtype=float)
-    allocator = ThrustAllocator(robot.length, robot.width, robot.max_thrust, tilt_limits,
-                                math.inf, 'robust', weights, planning=False)
-    result = allocator.allocate(tau)
-    achieved = np.asarray(result.achieved, dtype=float)
-    shortfall = tau - achieved
-    ratio = float(np.max(np.abs(shortfall) / shortfall_tolerances(robot, fraction)))
-    return Attainable(achieved, shortfall, ratio, (result.tilt_front, result.tilt_rear))
+class Oracle:
+    """The global optimum for one robot, within its servo range and over the full
+    circle (the robust allocator without ``previous``, built once)."""
+
+    def __init__(self, robot: RobotParams, weights: Sequence[float] = DEFAULT_WEIGHTS,
+                 fraction: float = SHORTFALL_FRACTION) -> None:
+        self.robot = robot
+        self.tolerances = shortfall_tolerances(robot, fraction)
+        limits = (robot.tilt_min, robot.tilt_max)
+        self._inside = self._allocator(limits, weights)
+        self._full = self._inside if limits == FULL_CIRCLE else \
+            self._allocator(FULL_CIRCLE, weights)
+
+    def _allocator(self, limits: tuple[float, float], weights: Sequence[float]
+                   ) -> ThrustAllocator:
+        r = self.robot
+        return ThrustAllocator(r.length, r.width, r.max_thrust, limits, math.inf, 'robust',
+                               weights, planning=False)
+
+    def _best(self, allocator: ThrustAllocator, tau: FloatArray) -> Attainable:
+        result = allocator.allocate(tau)
+        achieved = np.asarray(result.achieved, dtype=float)
+        shortfall = tau - achieved
+        return Attainable(achieved, shortfall, float(np.max(np.abs(shortfall) / self.tolerances)),
+                          (result.tilt_front, result.tilt_rear))
+
+    def judge(self, wrench: ArrayLike) -> SteadyVerdict:
+        """``wrench`` within the servo range and over the full circle."""
+        tau = np.asarray(wrench, dtype=float)
+        inside = self._best(self._inside, tau)
+        full = inside if self._full is self._inside else self._best(self._full, tau)
+        return SteadyVerdict(tau, inside, full)
 
 
 def judge(robot: RobotParams, wrench: ArrayLike, weights: Sequence[float] = DEFAULT_WEIGHTS,
           fraction: float = SHORTFALL_FRACTION) -> SteadyVerdict:
-    """``wrench`` within ``robot``'s tilt range and over the full circle."""
-    tau = np.asarray(wrench, dtype=float)
-    inside = attainable(robot, tau, (robot.tilt_min, robot.tilt_max), weights, fraction)
-    full = inside if (robot.tilt_min, robot.tilt_max) == FULL_CIRCLE else \
-        attainable(robot, tau, FULL_CIRCLE, weights, fraction)
-    return SteadyVerdict(tau, inside, full)
+    """``wrench`` within ``robot``'s tilt range and over the full circle (:class:`Oracle`)."""
+    return Oracle(robot, weights, fraction).judge(wrench)
 
 
 def from_meta(meta: Mapping[str, Any], quaternion: ArrayLike) -> SteadyVerdict | None:
@@ -157,3 +174,84 @@ def from_meta(meta: Mapping[str, Any], quaternion: ArrayLike) -> SteadyVerdict |
         return judge(robot, tau, tuple(float(w) for w in weights))
     except (TypeError, ValueError, KeyError):     # ParameterError is a ValueError
         return None
+
+
+#: s: the window over which :class:`HoldMonitor` looks at the demand.
+HOLD_WINDOW = 2.0
+#: A demand is steady when no component spreads (max - min over the window) by
+#: more than this many wrench tolerances: the controller asks for one wrench.
+STEADY_SPREAD = 5.0
+#: The allocator fell short (beyond the tolerance) at this fraction of the
+#: window's ticks at least.
+SHORT_FRACTION = 0.5
+
+
+class HoldMonitor:
+    """What the allocator says live: "cannot hold this setpoint with these servos".
+
+    Fed every tick with the wrench asked for and the one achieved
+    (:meth:`update`); at the end of each window of :data:`HOLD_WINDOW` it judges
+    the window: when the demand was steady (:data:`STEADY_SPREAD`) and short at
+    :data:`SHORT_FRACTION` of the ticks at least, the :class:`Oracle` is asked
+    about its mean. ``verdict`` is then that judgement (``verdict.in_range`` not
+    attainable: the servos cannot produce what holding the setpoint takes;
+    ``verdict.full_circle``: whether servos turning all the way round could), else
+    None. The window's ticks come from the control period; a stamp going back
+    calls for :meth:`reset`.
+    """
+
+    def __init__(self, robot: RobotParams, control_period: float,
+                 weights: Sequence[float] = DEFAULT_WEIGHTS,
+                 fraction: float = SHORTFALL_FRACTION) -> None:
+        self.oracle = Oracle(robot, weights, fraction)
+        self.size = max(1, round(HOLD_WINDOW / control_period))
+        self._wrenches = np.zeros((self.size, 6))
+        self._short = np.zeros(self.size, dtype=bool)
+        self.reset()
+
+    def reset(self) -> None:
+        self._count = 0
+        self.verdict: SteadyVerdict | None = None
+
+    @property
+    def cannot_hold(self) -> bool:
+        """The last window's steady demand lies beyond the servo range's reach."""
+        return self.verdict is not None and not self.verdict.in_range.attainable
+
+    def update(self, wrench: ArrayLike, achieved: ArrayLike) -> None:
+        """One tick: the wrench asked for and the one achieved (N, N m)."""
+        k = self._count % self.size
+        self._wrenches[k] = wrench
+        self._short[k] = bool(np.any(np.abs(self._wrenches[k] - np.asarray(achieved))
+                                     > self.oracle.tolerances))
+        self._count += 1
+        if self._count % self.size:
+            return
+        spread = np.ptp(self._wrenches, axis=0)
+        steady = bool(np.all(spread <= STEADY_SPREAD * self.oracle.tolerances))
+        if steady and np.mean(self._short) >= SHORT_FRACTION:
+            self.verdict = self.oracle.judge(np.mean(self._wrenches, axis=0))
+        else:
+            self.verdict = None
+
+    def report(self) -> tuple[str, dict[str, Any]]:
+        """For /diagnostics: :meth:`message` and the values (``cannot_hold``, the last
+        judged ``steady_demand`` and its ``steady_shortfall``, N and N m)."""
+        v = self.verdict
+        return self.message(), {
+            'cannot_hold': self.cannot_hold,
+            'steady_demand': [] if v is None else [float(x) for x in v.wrench],
+            'steady_shortfall': [] if v is None else [float(x) for x in v.in_range.shortfall]}
+
+    def message(self) -> str:
+        """One line for /diagnostics ('' while nothing is to be said)."""
+        v = self.verdict
+        if v is None or v.in_range.attainable:
+            return ''
+        short = ', '.join(f'{dof} {value:+.3g}' for dof, value, tol in
+                          zip(WRENCH_DOFS, v.in_range.shortfall, self.oracle.tolerances)
+                          if abs(value) > tol)
+        why = ('servos turning past vertical could' if v.full_circle.attainable
+               else 'no tilt on the full circle produces it either')
+        return (f'cannot hold this setpoint with these servos: the steady demand is short '
+                f'by {short} at every tilt in range ({why})')

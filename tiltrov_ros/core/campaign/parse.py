@@ -375,9 +375,6 @@ class _Parser:
                 out.append(Configuration(
                     c, a, g, '-'.join([c, a] + ([g] if len(gains) > 1 else []) + names),
                     tuple(names), robot))
-        if len({c.name for c in out}) != len(out):
-            raise self.fail('compare.robot', 'level names must differ from each other and '
-                                             'from the gain sets\' (they name configurations)')
         return tuple(out)
 
     def hold(self, value: Any, configurations: tuple[Configuration, ...]) -> tuple[Bound, ...]:
