@@ -64,7 +64,7 @@ from tiltrov_ros.core.allocation.results import (
     infeasible_rows,
     tilts_only,
 )
-from tiltrov_ros.core.allocation.robust import Options, fallback, release
+from tiltrov_ros.core.allocation.robust import Options, fallback
 from tiltrov_ros.core.allocation.selection import (
     choose,
     choose_batch,
@@ -231,9 +231,6 @@ class ThrustAllocator:
             configs = configs_from_batch(limits, tau) if result is None else []
         else:
             result = choose(limits, tau, configs, disc, prev, box)
-        if result is not None and self.mode == 'robust':
-            return self._finish(release(limits, self._options, tau, configs, disc, previous,
-                                        prev, result), finite)
         if result is None and self.mode == 'robust':
             snapped = snapped_candidates(limits, tau)
             result = choose(limits, tau, snapped, disc, prev, box, strict=False)

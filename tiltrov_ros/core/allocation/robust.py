@@ -18,17 +18,6 @@
    the best configurations over the whole range when they beat the per-tick
    optimum (by :data:`GLOBAL_GAIN`); the servos travel (method ``transit``)
    when that costs less over the horizon than staying.
-
-An exact answer within reach can be *strained*: its largest thrust beyond
-:data:`STRAIN_ONSET` of the limit, the pairs pushing against each other to
-make a small wrench (the exact branch the servos followed from where they
-were, e.g. nearly horizontal thrust lines making the net buoyancy). Such a
-configuration turns every lag of the thrusters into a wrench error and leaves
-no thrust to spare. :func:`release` asks the planner whether a less strained
-exact configuration is worth the travel: staying costs the strain per call
-(:func:`strain`, the excess thrust weighed like a wrench error of that size),
-an exact target its own strain; the travel is made when it costs less over
-the horizon than staying.
 """
 
 from __future__ import annotations
@@ -53,17 +42,6 @@ from tiltrov_ros.core.allocation.thrusts import TiltProblem
 GLOBAL_GAIN = 0.9
 #: At most this many global minima become targets.
 GLOBAL_TARGETS = 3
-#: An exact configuration whose largest thrust exceeds this fraction of the limit
-#: is strained (:func:`strain`).
-STRAIN_ONSET = 0.5
-
-
-def strain(peak: float, max_thrust: float, scale: float) -> float:
-    """The planner's cost per call of an exact configuration whose largest thrust is
-    ``peak`` [N]: the thrust beyond STRAIN_ONSET of the limit, weighed like a wrench
-    error of that size (scaled by ``scale``, the tilt problem's: c's units)."""
-    excess = max(0.0, peak - STRAIN_ONSET * max_thrust) / scale
-    return excess * excess
 
 
 @dataclass(frozen=True)
@@ -121,9 +99,9 @@ def per_tick_optimum(limits: Limits, problem: TiltProblem, prev: FloatArray | No
 
 
 def _exact_targets(limits: Limits, tau: FloatArray, configs: list[ExactConfig],
-                   prev: FloatArray, scale: float) -> list[Target]:
+                   prev: FloatArray) -> list[Target]:
     """Exact solutions in range (every twin) as targets: the closed-form roots, and
-    family members that keep one pair's tilt where it is; each costs its strain."""
+    family members that keep one pair's tilt where it is."""
     full = np.array([[limits.tilt_min, limits.tilt_max]] * 2)
     pool = list(configs)
     if any(c.family for c in configs) or not configs:
@@ -139,8 +117,7 @@ def _exact_targets(limits: Limits, tau: FloatArray, configs: list[ExactConfig],
             if max(abs(v) for v in f) > fmax:
                 continue
             key = (round(a, 9), round(b, 9))
-            out.setdefault(key, Target((a, b), strain(max(abs(v) for v in f),
-                                                      limits.max_thrust, scale)))
+            out.setdefault(key, Target((a, b), 0.0))
     return list(out.values())
 
 
@@ -161,52 +138,7 @@ def _global_targets(limits: Limits, problem: TiltProblem, local_cost: float) -> 
 def _targets(limits: Limits, problem: TiltProblem, tau: FloatArray,
              configs: list[ExactConfig], prev: FloatArray, cost: float) -> list[Target]:
     """Exact solutions in range, else the best configurations over the range."""
-    return (_exact_targets(limits, tau, configs, prev, problem.scale)
-            or _global_targets(limits, problem, cost))
-
-
-def _plans(options: Options, limits: Limits, prev: FloatArray | None) -> bool:
-    """The planner runs: with ``previous``, a finite reach and every thruster."""
-    return (options.planning and prev is not None and math.isfinite(limits.max_tilt_step)
-            and not limits.failed)
-
-
-def _travel(limits: Limits, problem: TiltProblem, options: Options, tau: FloatArray,
-            targets: list[Target], previous: AllocationResult | None, prev: FloatArray,
-            local_cost: float, disc: float, stuck: int) -> AllocationResult | None:
-    """The planner's travel (method ``transit``) to one of ``targets``, a travel under
-    way going on (``previous``'s target), or None to stay (cost ``local_cost``)."""
-    travelling = previous is not None and previous.method == 'transit'
-    kept = previous.target if travelling and previous is not None else None
-    if kept is not None:
-        targets = [*targets, Target(kept, evaluate(problem, kept[0], kept[1]).cost)]
-    chosen = plan(problem, prev, limits.max_tilt_step, local_cost, targets, options.horizon,
-                  kept)
-    if chosen is None:
-        return None
-    e = evaluate(problem, float(chosen.tilts[0]), float(chosen.tilts[1]))
-    transit = limits.make(tau, np.array(e.thrusts) * problem.scale, chosen.tilts, 'transit',
-                          disc)
-    return replace(transit, target=chosen.target.tilts, stuck=stuck)
-
-
-def release(limits: Limits, options: Options, tau: FloatArray, configs: list[ExactConfig],
-            disc: float, previous: AllocationResult | None, prev: FloatArray | None,
-            exact: AllocationResult) -> AllocationResult:
-    """Robust mode's exact answer within reach, or the travel to a less strained exact
-    configuration when that is worth it (see the module docstring)."""
-    if not _plans(options, limits, prev):
-        return exact
-    assert prev is not None
-    problem = TiltProblem(limits.geometry, tau, limits.max_thrust, limits.weights,
-                          limits.available)
-    cost = strain(float(np.max(np.abs(exact.thrusts))), limits.max_thrust, problem.scale)
-    if cost == 0.0:
-        return exact
-    targets = _exact_targets(limits, tau, configs, prev, problem.scale)
-    stuck = (previous.stuck if previous is not None else 0) + 1
-    moved = _travel(limits, problem, options, tau, targets, previous, prev, cost, disc, stuck)
-    return exact if moved is None else moved
+    return _exact_targets(limits, tau, configs, prev) or _global_targets(limits, problem, cost)
 
 
 def fallback(limits: Limits, options: Options, tau: FloatArray, configs: list[ExactConfig],
@@ -229,9 +161,19 @@ def fallback(limits: Limits, options: Options, tau: FloatArray, configs: list[Ex
         result, cost = incumbent, (incumbent.error / problem.scale) ** 2
     stuck = (previous.stuck if previous is not None else 0) + 1
     result = replace(result, stuck=stuck)
-    if not _plans(options, limits, prev):
+    if not (options.planning and prev is not None and math.isfinite(limits.max_tilt_step)
+            and not limits.failed):
         return result
-    assert prev is not None
     targets = _targets(limits, problem, tau, configs, prev, cost)
-    moved = _travel(limits, problem, options, tau, targets, previous, prev, cost, disc, stuck)
-    return result if moved is None else moved
+    travelling = previous is not None and previous.method == 'transit'
+    kept = previous.target if travelling and previous is not None else None
+    if kept is not None:
+        targets.append(Target(kept, evaluate(problem, kept[0], kept[1]).cost))
+    chosen = plan(problem, prev, limits.max_tilt_step, cost, targets, options.horizon, kept)
+    if chosen is None:
+        return result
+    a, b = float(chosen.tilts[0]), float(chosen.tilts[1])
+    e = evaluate(problem, a, b)
+    transit = limits.make(tau, np.array(e.thrusts) * problem.scale, chosen.tilts, 'transit',
+                          disc)
+    return replace(transit, target=chosen.target.tilts, stuck=stuck)

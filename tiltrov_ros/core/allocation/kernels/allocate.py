@@ -76,7 +76,7 @@ from tiltrov_ros.core.allocation.kernels.layout import (
 )
 from tiltrov_ros.core.allocation.kernels.limits import box, make, plain_norm6, wrench_of
 from tiltrov_ros.core.allocation.kernels.paper import paper_fallback
-from tiltrov_ros.core.allocation.kernels.robust import fallback, release
+from tiltrov_ros.core.allocation.kernels.robust import fallback
 from tiltrov_ros.core.allocation.kernels.select import choose, pick, snapped
 from tiltrov_ros.core.allocation.kernels.tiltcost import evaluate, problem
 from tiltrov_ros.core.allocation.results import FEASIBILITY_RTOL
@@ -205,19 +205,14 @@ def solve(cfg: FloatArray, tau: FloatArray, prev: FloatArray, out: FloatArray, v
             n = solve_row(cfg, tau, aims, 0, uv, configs, 0)
     else:
         found = choose(cfg, tau, configs, 0, n, disc, ref0, ref1, reach, True, out)
-    snapped_found = False
     if not found and robust and snapped(tau, tau_s):
         m, _ = candidates(cfg, tau_s, configs, n)
         if m < 0:
             m = solve_row(cfg, tau_s, aims, 0, uv, configs, n)
         found = choose(cfg, tau, configs, n, m, disc, ref0, ref1, reach, False, out)
         found = found and out[OUT_FEASIBLE] != 0.0
-        snapped_found = found
         n += m
     if found:
-        if robust and not snapped_found:
-            release(cfg, tau, configs, n, disc, prev, has_prev, anchor, out, fallback_work,
-                    hint)
         return
     if not robust:
         paper_fallback(cfg, tau, configs, n, disc, ref0, ref1, reach, out)

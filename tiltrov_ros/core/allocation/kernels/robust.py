@@ -33,7 +33,6 @@ from tiltrov_ros.core.allocation.kernels.layout import (
     OUT_ERROR,
     OUT_STUCK,
     OUT_TARGET,
-    OUT_THRUSTS,
     OUT_TILTS,
     PREV_EXISTS,
     PREV_STUCK,
@@ -55,7 +54,7 @@ from tiltrov_ros.core.allocation.kernels.search import minima, run
 from tiltrov_ros.core.allocation.kernels.select import variant
 from tiltrov_ros.core.allocation.kernels.tiltcost import evaluate, problem
 from tiltrov_ros.core.allocation.limits import LIMIT_SLACK
-from tiltrov_ros.core.allocation.robust import GLOBAL_GAIN, GLOBAL_TARGETS, STRAIN_ONSET
+from tiltrov_ros.core.allocation.robust import GLOBAL_GAIN, GLOBAL_TARGETS
 
 Ints = NDArray[np.int64]
 
@@ -137,20 +136,12 @@ def _round9(x: float) -> float:
 
 
 @jit.kernel()
-def strain(peak: float, max_thrust: float, scale: float) -> float:
-    """``robust.strain``: the thrust beyond STRAIN_ONSET of the limit, scaled, squared."""
-    excess = max(0.0, peak - STRAIN_ONSET * max_thrust) / scale
-    return excess * excess
-
-
-@jit.kernel()
 def exact_targets(cfg: FloatArray, tau: FloatArray, conf: FloatArray, count: int, p0: float,
                   p1: float, aims: FloatArray, uv: FloatArray, scratch: FloatArray,
-                  full: FloatArray, keys: FloatArray, targets: FloatArray,
-                  scale: float) -> int:
-    """``robust._exact_targets``: exact solutions in range (every twin) as targets costing
-    their strain into ``targets``, first seen first; returns their count. ``keys``:
-    scratch (MAX_TARGETS, 2) for the rounded tilts that tell targets apart."""
+                  full: FloatArray, keys: FloatArray, targets: FloatArray) -> int:
+    """``robust._exact_targets``: exact solutions in range (every twin) as targets of cost
+    0 into ``targets``, first seen first; returns their count. ``keys``: scratch
+    (MAX_TARGETS, 2) for the rounded tilts that tell targets apart."""
     pool, size = conf, count
     family = count == 0
     for j in range(count):
@@ -167,8 +158,7 @@ def exact_targets(cfg: FloatArray, tau: FloatArray, conf: FloatArray, count: int
     for j in range(size):
         for v in range(VARIANTS):
             exists, f1, f2, f3, f4, a, b = variant(cfg, pool, j, v, p0, p1, full)
-            peak = max(abs(f1), abs(f2), abs(f3), abs(f4))
-            if not exists or peak > fmax:
+            if not exists or max(abs(f1), abs(f2), abs(f3), abs(f4)) > fmax:
                 continue
             ka, kb = _round9(a), _round9(b)
             seen = False
@@ -179,8 +169,7 @@ def exact_targets(cfg: FloatArray, tau: FloatArray, conf: FloatArray, count: int
             if seen:
                 continue
             keys[n, 0], keys[n, 1] = ka, kb
-            targets[n, TGT_A], targets[n, TGT_B] = a, b
-            targets[n, TGT_COST] = strain(peak, cfg[CFG_FMAX], scale)
+            targets[n, TGT_A], targets[n, TGT_B], targets[n, TGT_COST] = a, b, 0.0
             n += 1
     return n
 
@@ -248,43 +237,27 @@ def fallback(cfg: FloatArray, tau: FloatArray, conf: FloatArray, count: int, dis
         cost = error * error
     stuck = (prev[PREV_STUCK] if previous else 0.0) + 1.0
     out[OUT_STUCK] = stuck
-    if not plans(cfg, has_prev):
-        return
-    n_targets = exact_targets(cfg, tau, conf, count, anchor[0], anchor[1], aims, uv, scratch,
-                              full, keys, targets, prob[PROB_SCALE])
-    if n_targets == 0:
-        n_targets = global_targets(cfg, prob, cost, search_box, recs, targets, 0)
-    travel(cfg, prob, tau, targets, n_targets, prev, anchor, cost, disc, stuck, out, rec,
-           plan_out, kept, hint)
-
-
-@jit.kernel()
-def plans(cfg: FloatArray, has_prev: bool) -> bool:
-    """``robust._plans``: with previous, a finite reach and every thruster."""
     failed = False
     for i in range(4):
         if cfg[CFG_AVAILABLE + i] == 0.0:
             failed = True
-    return cfg[CFG_PLANNING] != 0.0 and has_prev and math.isfinite(cfg[CFG_STEP]) and not failed
-
-
-@jit.kernel()
-def travel(cfg: FloatArray, prob: FloatArray, tau: FloatArray, targets: FloatArray,
-           n_targets: int, prev: FloatArray, anchor: FloatArray, local_cost: float,
-           disc: float, stuck: float, out: FloatArray, rec: FloatArray, plan_out: FloatArray,
-           kept: FloatArray, hint: Ints) -> bool:
-    """``robust._travel``: the planner's travel into ``out`` (True), or False to stay."""
+    step = cfg[CFG_STEP]
+    if not (cfg[CFG_PLANNING] != 0.0 and has_prev and math.isfinite(step) and not failed):
+        return
+    n_targets = exact_targets(cfg, tau, conf, count, anchor[0], anchor[1], aims, uv, scratch,
+                              full, keys, targets)
+    if n_targets == 0:
+        n_targets = global_targets(cfg, prob, cost, search_box, recs, targets, 0)
     kept[0] = kept[1] = math.nan
-    if (prev[PREV_EXISTS] != 0.0 and prev[PREV_TRANSIT] != 0.0
-            and prev[PREV_TARGET] == prev[PREV_TARGET]):
+    if previous and prev[PREV_TRANSIT] != 0.0 and prev[PREV_TARGET] == prev[PREV_TARGET]:
         kept[0], kept[1] = prev[PREV_TARGET], prev[PREV_TARGET + 1]
         evaluate(prob, kept[0], kept[1], hint, False, rec)
         targets[n_targets, TGT_A], targets[n_targets, TGT_B] = kept[0], kept[1]
         targets[n_targets, TGT_COST] = rec[REC_COST]
         n_targets += 1
-    if not plan(prob, anchor, cfg[CFG_STEP], local_cost, targets, n_targets,
-                int(cfg[CFG_HORIZON]), kept, plan_out):
-        return False
+    if not plan(prob, anchor, step, cost, targets, n_targets, int(cfg[CFG_HORIZON]), kept,
+                plan_out):
+        return
     a, b = plan_out[0], plan_out[1]
     evaluate(prob, a, b, hint, False, rec)
     s = prob[PROB_SCALE]
@@ -292,27 +265,3 @@ def travel(cfg: FloatArray, prob: FloatArray, tau: FloatArray, targets: FloatArr
          rec[REC_THRUSTS + 3] * s, a, b, _TRANSIT, disc, out)
     out[OUT_TARGET], out[OUT_TARGET + 1] = plan_out[2], plan_out[3]
     out[OUT_STUCK] = stuck
-    return True
-
-
-@jit.kernel()
-def release(cfg: FloatArray, tau: FloatArray, conf: FloatArray, count: int, disc: float,
-            prev: FloatArray, has_prev: bool, anchor: FloatArray, out: FloatArray,
-            work: tuple[FloatArray, ...], hint: Ints) -> None:
-    """``robust.release``: ``out`` holds the exact answer within reach; replaced by the
-    travel to a less strained exact configuration when that is worth it."""
-    prob, rec, _, _, _, targets, keys, aims, uv, scratch, full, plan_out, kept = work
-    if not plans(cfg, has_prev):
-        return
-    problem(cfg, tau, prob)
-    peak = 0.0
-    for i in range(4):
-        peak = max(peak, abs(out[OUT_THRUSTS + i]))
-    cost = strain(peak, cfg[CFG_FMAX], prob[PROB_SCALE])
-    if cost == 0.0:
-        return
-    n_targets = exact_targets(cfg, tau, conf, count, anchor[0], anchor[1], aims, uv, scratch,
-                              full, keys, targets, prob[PROB_SCALE])
-    stuck = (prev[PREV_STUCK] if prev[PREV_EXISTS] != 0.0 else 0.0) + 1.0
-    travel(cfg, prob, tau, targets, n_targets, prev, anchor, cost, disc, stuck, out, rec,
-           plan_out, kept, hint)
