@@ -17,15 +17,9 @@ the horizon. Travelling one pair at a time keeps the other pair working,
 which is what usually makes a 180 deg flip affordable. The servos take the
 first step of the cheapest route when it costs less than staying with the
 per-tick optimum for the whole horizon, ``horizon * c_local``; the plan is made
-again at the next call.
-
-A travel under way is not chased after every change of the wrench: its
-target follows the wrench (the target of this call nearest to it, within
-:data:`TRACK_RADIUS`, is the same configuration moved; the robust mode's
-caller finds it), and the travel goes on while its route still beats staying
-for the horizon, unless another target's route is cheaper by the factor
-:data:`RETARGET_GAIN`: retargeting pays its whole route from where the servos
-are, and an only slightly better target does not make the servos turn.
+again at the next call. A travel under way goes on while its target still
+beats the per-tick optimum, so the servos do not turn back halfway when the
+wrench moves a little.
 
 Staying costs a little every tick, the travel a lot once: a small steady
 error is kept until the controller's reaction to it has made it large enough
@@ -42,13 +36,6 @@ import numpy as np
 
 from tiltrov_ros.core.allocation.decomposition import FloatArray
 from tiltrov_ros.core.allocation.thrusts import TiltProblem
-
-#: A travel under way gives way to another target only when that one's route costs
-#: less than this fraction of the travel's own.
-RETARGET_GAIN = 0.5
-#: rad: a target of this call within this of a travel's target (both tilts) is that
-#: target, moved by the wrench's change.
-TRACK_RADIUS = math.radians(15.0)
 
 
 @dataclass(frozen=True)
@@ -136,24 +123,20 @@ def plan(problem: TiltProblem, start: FloatArray, step: float, local_cost: float
 
     ``start``: the tilts now; ``step``: servo reach per call; ``local_cost``: c of
     the per-tick optimum; ``targets``: configurations worth travelling to (one of
-    them ``kept``, the target of a travel under way, if any: the travel goes on
-    while its route beats staying, unless another target's route costs less than
-    ``RETARGET_GAIN`` times its own).
+    them ``kept``, the target of a travel under way, if any).
     """
     if not targets or not math.isfinite(step):
         return None
     options = routes(problem, start, step, targets, horizon)
     if not options:
         return None
-    best = min(options, key=lambda r: r.cost)
     if kept is not None:
         going = [r for r in options if abs(r.target.tilts[0] - kept[0]) <= 1e-9
                  and abs(r.target.tilts[1] - kept[1]) <= 1e-9]
-        if going:
+        if going and going[0].target.cost < local_cost:
             route = min(going, key=lambda r: r.cost)
-            if not best.cost < RETARGET_GAIN * route.cost:
-                return Plan(route.first, route.target) if route.cost < horizon * local_cost \
-                    else None
+            return Plan(route.first, route.target)
+    best = min(options, key=lambda r: r.cost)
     if best.cost < horizon * local_cost:
         return Plan(best.first, best.target)
     return None

@@ -32,7 +32,7 @@ from tiltrov_ros.core.allocation.decomposition import ExactConfig, FloatArray
 from tiltrov_ros.core.allocation.limits import LIMIT_SLACK, Limits
 from tiltrov_ros.core.allocation.local import evaluate
 from tiltrov_ros.core.allocation.optimum import Search
-from tiltrov_ros.core.allocation.planner import TRACK_RADIUS, Target, plan
+from tiltrov_ros.core.allocation.planner import Target, plan
 from tiltrov_ros.core.allocation.results import AllocationResult
 from tiltrov_ros.core.allocation.selection import variants
 from tiltrov_ros.core.allocation.thrusts import TiltProblem
@@ -141,19 +141,6 @@ def _targets(limits: Limits, problem: TiltProblem, tau: FloatArray,
     return _exact_targets(limits, tau, configs, prev) or _global_targets(limits, problem, cost)
 
 
-def track(targets: list[Target], kept: tuple[float, float]) -> Target | None:
-    """The target nearest to a travel's target ``kept`` (the largest of the two tilts'
-    distances), if within :data:`~.planner.TRACK_RADIUS`: the same configuration,
-    moved by the wrench's change (first of equals)."""
-    best: Target | None = None
-    gap = TRACK_RADIUS
-    for target in targets:
-        d = max(abs(target.tilts[0] - kept[0]), abs(target.tilts[1] - kept[1]))
-        if d <= gap and (best is None or d < gap):
-            best, gap = target, d
-    return best
-
-
 def fallback(limits: Limits, options: Options, tau: FloatArray, configs: list[ExactConfig],
              disc: float, previous: AllocationResult | None, prev: FloatArray | None,
              box: FloatArray, incumbent: AllocationResult | None) -> AllocationResult:
@@ -181,11 +168,7 @@ def fallback(limits: Limits, options: Options, tau: FloatArray, configs: list[Ex
     travelling = previous is not None and previous.method == 'transit'
     kept = previous.target if travelling and previous is not None else None
     if kept is not None:
-        moved = track(targets, kept)
-        if moved is not None:
-            kept = moved.tilts
-        else:
-            targets.append(Target(kept, evaluate(problem, kept[0], kept[1]).cost))
+        targets.append(Target(kept, evaluate(problem, kept[0], kept[1]).cost))
     chosen = plan(problem, prev, limits.max_tilt_step, cost, targets, options.horizon, kept)
     if chosen is None:
         return result

@@ -16,7 +16,6 @@ import numpy as np
 from tiltrov_ros.core import jit
 from tiltrov_ros.core.allocation.decomposition import FloatArray
 from tiltrov_ros.core.allocation.kernels.tiltcost import bounds
-from tiltrov_ros.core.allocation.planner import RETARGET_GAIN
 
 # A route (a row of routes()' output): which target, its first step, length and cost.
 ROUTE_TARGET = 0          # index into targets
@@ -173,24 +172,24 @@ def plan(prob: FloatArray, start: FloatArray, step: float, local_cost: float,
     n = routes(prob, start, step, targets, n_targets, horizon, options)
     if n == 0:
         return False
-    best = 0
-    for r in range(1, n):
-        if options[r, ROUTE_COST] < options[best, ROUTE_COST]:
-            best = r
     chosen = -1
     if not (math.isnan(kept[0]) or math.isnan(kept[1])):
-        going = -1
+        first_going = -1
         for r in range(n):
             t = int(options[r, ROUTE_TARGET])
             if (abs(targets[t, 0] - kept[0]) <= 1e-9 and abs(targets[t, 1] - kept[1]) <= 1e-9):
-                if going < 0 or options[r, ROUTE_COST] < options[going, ROUTE_COST]:
-                    going = r
-        if going >= 0 and not options[best, ROUTE_COST] < RETARGET_GAIN * options[going,
-                                                                                    ROUTE_COST]:
-            if not options[going, ROUTE_COST] < horizon * local_cost:
-                return False
-            chosen = going
+                if first_going < 0:
+                    first_going = r
+                if chosen < 0 or options[r, ROUTE_COST] < options[chosen, ROUTE_COST]:
+                    chosen = r
+        if first_going >= 0 and not (
+                targets[int(options[first_going, ROUTE_TARGET]), 2] < local_cost):
+            chosen = -1
     if chosen < 0:
+        best = 0
+        for r in range(1, n):
+            if options[r, ROUTE_COST] < options[best, ROUTE_COST]:
+                best = r
         if not options[best, ROUTE_COST] < horizon * local_cost:
             return False
         chosen = best

@@ -54,7 +54,6 @@ from tiltrov_ros.core.allocation.kernels.search import minima, run
 from tiltrov_ros.core.allocation.kernels.select import variant
 from tiltrov_ros.core.allocation.kernels.tiltcost import evaluate, problem
 from tiltrov_ros.core.allocation.limits import LIMIT_SLACK
-from tiltrov_ros.core.allocation.planner import TRACK_RADIUS
 from tiltrov_ros.core.allocation.robust import GLOBAL_GAIN, GLOBAL_TARGETS
 
 Ints = NDArray[np.int64]
@@ -201,18 +200,6 @@ def global_targets(cfg: FloatArray, prob: FloatArray, local_cost: float, search_
 
 
 @jit.kernel()
-def track(targets: FloatArray, n_targets: int, a: float, b: float) -> int:
-    """``robust.track``: the index of the target nearest to (a, b) within TRACK_RADIUS
-    (the larger of the two tilts' distances; first of equals), else -1."""
-    best, gap = -1, TRACK_RADIUS
-    for t in range(n_targets):
-        d = max(abs(targets[t, TGT_A] - a), abs(targets[t, TGT_B] - b))
-        if d <= gap and (best < 0 or d < gap):
-            best, gap = t, d
-    return best
-
-
-@jit.kernel()
 def fallback(cfg: FloatArray, tau: FloatArray, conf: FloatArray, count: int, disc: float,
              prev: FloatArray, has_prev: bool, anchor: FloatArray, box: FloatArray,
              incumbent: FloatArray, has_incumbent: bool, out: FloatArray,
@@ -264,14 +251,10 @@ def fallback(cfg: FloatArray, tau: FloatArray, conf: FloatArray, count: int, dis
     kept[0] = kept[1] = math.nan
     if previous and prev[PREV_TRANSIT] != 0.0 and prev[PREV_TARGET] == prev[PREV_TARGET]:
         kept[0], kept[1] = prev[PREV_TARGET], prev[PREV_TARGET + 1]
-        moved = track(targets, n_targets, kept[0], kept[1])
-        if moved >= 0:
-            kept[0], kept[1] = targets[moved, TGT_A], targets[moved, TGT_B]
-        else:
-            evaluate(prob, kept[0], kept[1], hint, False, rec)
-            targets[n_targets, TGT_A], targets[n_targets, TGT_B] = kept[0], kept[1]
-            targets[n_targets, TGT_COST] = rec[REC_COST]
-            n_targets += 1
+        evaluate(prob, kept[0], kept[1], hint, False, rec)
+        targets[n_targets, TGT_A], targets[n_targets, TGT_B] = kept[0], kept[1]
+        targets[n_targets, TGT_COST] = rec[REC_COST]
+        n_targets += 1
     if not plan(prob, anchor, step, cost, targets, n_targets, int(cfg[CFG_HORIZON]), kept,
                 plan_out):
         return
