@@ -21,11 +21,13 @@ the ROS node and the headless runner give the same numbers.
 * ``pid`` - PD plus the restoring forces g(eta) of the controller's nominal
   model and integral action with a clamp (anti-windup): the constant moment of
   the center-of-mass modeling error and the net buoyancy leave no steady-state
-  error. Given the wrench the allocator achieved of its previous command
-  (``update(..., achieved=...)``: ``wrench_achieved``, one tick late), the
-  integral of a DOF stops while that command fell short beyond the wrench
-  tolerance in the direction the error pushes: it cannot wind up against a
-  wrench the thrusters do not produce.
+  error. With ``gains.antiwindup`` > 0 (off by default: measured in
+  docs/campaign.md, it lost runs as often as it saved them) and the wrench the
+  allocator achieved of its previous command (``update(..., achieved=...)``:
+  ``wrench_achieved``, one tick late), the integral of a DOF stops while that
+  command fell short by more than ``antiwindup`` wrench tolerances in the
+  direction the error pushes: it cannot wind up against a wrench the thrusters
+  do not produce.
 
 With the numba backend (:mod:`tiltrov_ros.core.jit`) each ``update`` makes one
 call of the compiled law (:mod:`tiltrov_ros.core.control_kernels`); the numpy
@@ -67,10 +69,6 @@ FloatArray = NDArray[np.float64]
 ControllerKind = Literal['pd', 'switching', 'pid']
 CONTROLLER_KINDS: tuple[str, ...] = ('pd', 'switching', 'pid')
 CONTROLLER_YAML = 'wrench_controller.yaml'
-
-#: pid: a DOF's integral holds still while the previous command fell short there by
-#: more than this many wrench tolerances (shortfall_tolerances) in the error's direction.
-ANTIWINDUP_FACTOR = 1.0
 
 # Switching baseline: the wrench components each mode can produce.
 _HORIZONTAL = np.array([1.0, 1.0, 0.0, 0.0, 0.0, 1.0])
@@ -136,8 +134,12 @@ GAINS = ParamTable('gains', [
     Param('integral_limit', 'floats', SHIPPED, 'pid only: bound on abs(ki integral(e)) per DOF, '
           'the anti-windup clamp (may be left out: zero)', _GAIN_UNITS + 'N, N m', size=6,
           low=0.0),
+    Param('antiwindup', 'float', 0.0, 'pid only: the integral of a DOF holds still while the '
+          'previous wrench fell short there (wrench_achieved) by more than this many wrench '
+          'tolerances (0.4 N, 0.08 N m for the paper\'s robot) in the direction the error '
+          'pushes; 0: off', '-', low=0.0, high=1e6),
 ], prefix='gains')
-_ZERO_GAINS = {'ki': (0.0,) * 6, 'integral_limit': (0.0,) * 6}
+_ZERO_GAINS = {'ki': (0.0,) * 6, 'integral_limit': (0.0,) * 6, 'antiwindup': 0.0}
 
 #: ``switching.*``: the rule of the switching baseline (see the module docstring).
 SWITCHING = ParamTable('switching', [
@@ -169,17 +171,20 @@ class Gains:
 
     kp : N/m, N m/rad; kd : N s/m, N m s/rad; ki : N/(m s), N m/(rad s);
     integral_limit : bound on |Ki * integral(e)| per DOF [N, N m] (anti-windup).
-    ``ki`` and ``integral_limit`` are used by ``pid`` only.
+    antiwindup : the shortfall, in wrench tolerances, that holds the integral (0: off).
+    ``ki``, ``integral_limit`` and ``antiwindup`` are used by ``pid`` only.
     """
 
     kp: tuple[float, ...]
     kd: tuple[float, ...]
-    ki: tuple[float, ...] = _ZERO_GAINS['ki']
-    integral_limit: tuple[float, ...] = _ZERO_GAINS['integral_limit']
+    ki: tuple[float, ...] = (0.0,) * 6
+    integral_limit: tuple[float, ...] = (0.0,) * 6
+    antiwindup: float = 0.0
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any], *, source: str | None = None) -> Gains:
-        """From the ``gains`` block (:data:`GAINS`); ``ki`` and ``integral_limit`` may be absent."""
+        """From the ``gains`` block (:data:`GAINS`); ``ki``, ``integral_limit`` and
+        ``antiwindup`` may be absent."""
         return cls(**GAINS.complete(values, source=source, defaults=_ZERO_GAINS))
 
 
@@ -329,9 +334,10 @@ class PIDController:
     does not know the center-of-mass error); the integral removes what remains.
     The integral of each DOF is clamped so that |Ki integral(e)| stays within
     ``integral_limit`` (clamping anti-windup); it integrates with the time
-    between updates (the control period), never more than 1 s at a time. It
-    holds still in a DOF where the previous command fell short (``achieved``:
-    :func:`earth_shortfall` of last - achieved beyond the wrench tolerance,
+    between updates (the control period), never more than 1 s at a time. With
+    ``gains.antiwindup`` > 0 it holds still in a DOF where the previous command
+    fell short (``achieved``: :func:`earth_shortfall` of last - achieved beyond
+    ``antiwindup`` times the wrench tolerance,
     :func:`~tiltrov_ros.core.allocation.shortfall_tolerances`, with the sign of
     the error there).
     """
@@ -345,13 +351,18 @@ class PIDController:
         limit = np.array(gains.integral_limit)
         with np.errstate(divide='ignore', invalid='ignore'):
             self._max_integral = np.where(self._ki > 0, limit / self._ki, 0.0)
-        self._tolerance = ANTIWINDUP_FACTOR * shortfall_tolerances(robot)
+        self._tolerance = gains.antiwindup * shortfall_tolerances(robot)
         self.compiled = jit.compiled()
         self._law = (ck.CompiledLaw(ck.LAW_PID, ck.law_config(
             gains.kp, gains.kd, gains.ki, self._max_integral, robot=robot,
             tolerance=self._tolerance)) if self.compiled else None)
         self._last = np.zeros(6)
         self.reset()
+
+    @property
+    def uses_achieved(self) -> bool:
+        """The anti-windup reads the achieved wrench (``gains.antiwindup`` > 0)."""
+        return self.gains.antiwindup > 0.0
 
     @property
     def integral(self) -> FloatArray:
@@ -371,7 +382,7 @@ class PIDController:
         """``achieved``: what the allocator achieved of this controller's previous wrench
         (None: unknown; the integral then integrates as without it)."""
         previous = self._last_t
-        got = achieved if previous is not None else None
+        got = achieved if previous is not None and self.uses_achieved else None
         if self.compiled and self._law is not None:
             dt = 0.0 if previous is None else min(max(t - previous, 0.0), 1.0)
             out = self._law(position, quaternion, nu, reference, dt=dt,

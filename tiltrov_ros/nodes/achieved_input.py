@@ -4,12 +4,13 @@ The allocator answers each ``wrench_cmd`` with ``wrench_achieved`` (eq. (4) of
 its answer) stamped alike. The pid is given, at each tick, the achieved wrench
 that answers the controller's previous wrench (the one stamped with the last
 tick the node answered; :class:`~tiltrov_ros.core.controllers.PIDController`):
-its integral then holds still where that wrench fell short. The headless runner
-passes the same, one tick late, so a lockstep run stays equal to it: there a
-pid tick waits for that answer as for its setpoint velocity, and after
-``input_timeout`` goes on without it (counted on ``/diagnostics``:
-``achieved_timeouts``). The newest message by stamp is kept; a stamp going
-back (a restarted stack) is taken as it comes.
+with ``gains.antiwindup`` > 0 its integral then holds still where that wrench
+fell short. The headless runner passes the same, one tick late, so a lockstep
+run stays equal to it: there, while the anti-windup is on, a pid tick waits
+for that answer as for its setpoint velocity, and after ``input_timeout``
+goes on without it (counted on ``/diagnostics``: ``achieved_timeouts``). The
+newest message by stamp is kept; a stamp going back (a restarted stack) is
+taken as it comes.
 """
 
 from __future__ import annotations
@@ -55,8 +56,8 @@ class AchievedInput:
     def waits_for_achieved(self: Any, ns: int, timed_out: bool) -> bool:
         """Lockstep: the pid's tick ``ns`` waits for the answer to the previous tick,
         unless its inputs have ``timed_out`` (counted when that answer is missing)."""
-        missing = (self.kind == 'pid' and self._last_ns == ns - self.period_ns
-                   and self.achieved_of_last() is None)
+        missing = (getattr(self.controller, 'uses_achieved', False)
+                   and self._last_ns == ns - self.period_ns and self.achieved_of_last() is None)
         if missing and timed_out:
             self.achieved_timeouts += 1
             self.get_logger().warning(f'no wrench_achieved stamped {format_ns(self._last_ns)}'

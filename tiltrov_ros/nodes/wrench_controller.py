@@ -133,7 +133,8 @@ def _config_mapping(get: Any) -> dict[str, Any]:
     """The ``wrench_controller`` parameters as ControllerConfig.from_mapping wants them."""
     return {
         'controller': get('controller'),
-        'gains': {key: list(get(GAINS.full_name(key))) for key in GAINS.names},
+        'gains': {key: value if isinstance(value, float) else list(value)  # arrays: lists
+                  for key in GAINS.names for value in [get(GAINS.full_name(key))]},
         'switching': {key: get(SWITCHING.full_name(key)) for key in SWITCHING.names},
     }
 

@@ -350,7 +350,8 @@ class _Parser:
         for name, gains in value.items():
             where = f'compare.gains.{name}'
             self.names([name], 'compare.gains')
-            body = self.mapping(gains, where, {'kp', 'kd', 'ki', 'integral_limit'})
+            body = self.mapping(gains, where, {'kp', 'kd', 'ki', 'integral_limit',
+                                               'antiwindup'})
             if body:
                 try:   # the same checks as the controller's parameter file
                     Gains.from_mapping({'kp': [1.0] * 6, 'kd': [1.0] * 6, **body})
