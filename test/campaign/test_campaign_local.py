@@ -86,8 +86,12 @@ def test_the_summary_counts_the_table(local_run: CampaignRun) -> None:
                   for r in mine if r['status'] == 'ok']
         assert config['position_mm']['max'] == pytest.approx(1e3 * max(errors))
         assert config['worst'][0] in {r['run_id'] for r in mine if r['status'] == 'failed'}
+        verdicts = {v: sum(r['verdict'] == v for r in mine)
+                    for v in ('servo_range', 'physics', 'control')}
+        assert config['verdicts'] == verdicts and sum(verdicts.values()) == 4 - holds
+        why = ', '.join(f'{n} {v.replace("_", " ")}' for v, n in verdicts.items())
         assert (f"hold rate {config['configuration']}: {100 * holds / 4:.0f} % ({holds} of 4 "
-                f"runs, {config['failed']} failed)") in local_run.stdout
+                f"runs, {config['failed']} failed; not held: {why})") in local_run.stdout
     markdown = (local_run.out / 'summary.md').read_text()
     assert '| pd-robust | 4 |' in markdown and 'final_error: x, y, z <= 100 mm' in markdown
     for name in ('cdf_final_position.png', 'error_vs_current.png'):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 import subprocess
 import sys
@@ -14,6 +15,7 @@ from tiltrov_ros.cli import main
 from tiltrov_ros.core import jit
 from tiltrov_ros.core.metrics import compute_metrics
 from tiltrov_ros.core.runlog import RunLog
+from tiltrov_ros.paths import config_file
 
 INTERFACE_KEYS = {'rms_error', 'final_error', 'max_tilt_rate', 'thrust_saturation_fraction',
                   'wrench_error_rms'}
@@ -64,7 +66,22 @@ def test_compare_overlays_several_controllers(tmp_path: Path) -> None:
     assert not list(out.glob('*.png'))
 
 
+def test_a_robot_file_by_name_or_path(tmp_path: Path) -> None:
+    """--robot robot_past_vertical: the servos' range reaches the run and the steady
+    wrench's verdict; a path works as well."""
+    for robot in ('robot_past_vertical', str(config_file('robot_past_vertical.yaml'))):
+        out = tmp_path / Path(robot).stem
+        code = main(['sim', '--scenario', 'current_hold', '--controller', 'pid', '--duration',
+                     '1', '--robot', robot, '--out', str(out), '--no-figures'])
+        assert code == 0
+        meta = RunLog.load_npz(out / 'run.npz').meta
+        assert (meta['tilt_min'], meta['tilt_max']) == pytest.approx((-math.pi, math.pi))
+        metrics = json.loads((out / 'metrics.json').read_text())
+        assert metrics['steady_shortfall_ratio'] < 1.0
+
+
 @pytest.mark.parametrize(('args', 'message'), [
+    (['--robot', 'no_such_robot'], "'no_such_robot'; allowed: a robot parameter file"),
     (['--scenario', 'nonesuch'], "no scenario named 'nonesuch'"),
     (['--scenario', '{bad}'], 'bad.yaml: not valid YAML'),
     (['--scenario', '{wrong}'], "wrong.yaml: reference.x[0]: unknown term type 'parabola'"),

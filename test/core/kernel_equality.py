@@ -15,6 +15,13 @@ checks the two answers:
   its case kept for the message), never taken for an equality; a point that
   differs without such a tie fails.
 
+A per-tick optimum (``optimized``) may also stop a hair apart: its search ends
+when the predicted decrease falls below 1e-7 of the cost (optimum.py), so
+rounding that differs in the last iterations leaves the two weighted errors
+equal to :data:`STOP_RTOL` only (seen once in 500 calls of current_hold with
+the pid's anti-windup). That is counted as a tie too, with the kernels' point
+costed by the reference.
+
 Both sides must also be consistent: the achieved wrench is eq. (4) of the
 thrusts and tilts.
 """
@@ -32,6 +39,8 @@ from tiltrov_ros.core.allocation.decomposition import fold_tilt
 from tiltrov_ros.core.thrust_map import allocation_matrix
 
 RTOL = 1e-9
+#: The per-tick optimum's stopping point: errors equal to this (relative) tie.
+STOP_RTOL = 1e-6
 
 #: The compiled side needs numba; under TILTROV_BACKEND=numpy the reference has
 #: nothing to be compared with (the reference's own tests still run).
@@ -76,8 +85,15 @@ class Tally:
         if r.method == 'pseudo' and _pseudo_tie(alloc, r, k, previous):
             self.ties.append(f'{where}: pseudo, the paper rule has two angles equally near')
             return False
-        assert self.error_close(alloc, tau, r.error, k.error), (
-            f'{where}: weighted error {r.error!r} (reference) vs {k.error!r} (kernels)')
+        if not self.error_close(alloc, tau, r.error, k.error):
+            stopped = (r.method == 'optimized'
+                       and abs(r.error - k.error) <= STOP_RTOL * max(r.error, k.error)
+                       and self.error_close(alloc, tau, k.error, _cost(alloc, tau, k)))
+            assert stopped, (f'{where}: weighted error {r.error!r} (reference) vs '
+                             f'{k.error!r} (kernels)')
+            self.ties.append(f'{where}: optimized, the search stopped {k.error / r.error - 1:.2g}'
+                             ' apart in error')
+            return False
         for res in (r, k):
             np.testing.assert_allclose(
                 res.achieved, alloc.wrench(res.thrusts, res.tilt_front, res.tilt_rear),
@@ -92,8 +108,7 @@ class Tally:
             return True
         # A tie? The kernels' point costed by the reference, within the limits.
         lo, hi = alloc.tilt_limits
-        cost = float(alloc.weighted_error(tau[None], alloc.wrench(
-            k.thrusts[None], np.array([k.tilt_front]), np.array([k.tilt_rear])))[0])
+        cost = _cost(alloc, tau, k)
         within = (np.all(np.abs(k.thrusts) <= alloc.max_thrust)
                   and lo <= k.tilt_front <= hi and lo <= k.tilt_rear <= hi)
         assert within and self.error_close(alloc, tau, r.error, cost), (
@@ -114,6 +129,12 @@ class Tally:
         """Ties are rare (two optima equal to 1e-9): at most ``share`` of the calls."""
         assert len(self.ties) <= max(1, share * self.calls), (
             f'{len(self.ties)} ties in {self.calls} calls:\n' + '\n'.join(self.ties[:20]))
+
+
+def _cost(alloc: ThrustAllocator, tau: np.ndarray, k: AllocationResult) -> float:
+    """The weighted error of ``k``'s thrusts and tilts by the reference's formulas."""
+    return float(alloc.weighted_error(tau[None], alloc.wrench(
+        k.thrusts[None], np.array([k.tilt_front]), np.array([k.tilt_rear])))[0])
 
 
 def _pseudo_tie(alloc: ThrustAllocator, r: AllocationResult, k: AllocationResult,

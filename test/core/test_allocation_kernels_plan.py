@@ -14,9 +14,10 @@ from __future__ import annotations
 
 import math
 
-from allocation_cases import RANGES, assert_close, atol, cases, count
+from allocation_cases import RANGES, assert_close, atol, cases, count, make_case
 import numpy as np
 
+from tiltrov_ros.core.allocation.allocator import DEFAULT_WEIGHTS
 from tiltrov_ros.core.allocation.kernels import plan as kplan
 from tiltrov_ros.core.allocation.planner import Target, path, plan, routes
 
@@ -112,3 +113,29 @@ def test_route_sums_add_in_numpys_order() -> None:
     for n in [*range(1, 301), 1000, 4099]:
         a = rng.normal(size=n) * 10.0 ** rng.uniform(-5, 5, n)
         assert kplan._pairwise_sum(a, n) == float(np.sum(a)), n
+
+
+def test_a_travel_under_way_is_not_abandoned_for_a_slightly_better_target() -> None:
+    """The planner does not chase: from (10, 10) deg, the route to (80, 85) deg costs
+    0.1 % less than the route to (85, 80) deg; a fresh plan takes the cheaper, a travel
+    under way to (85, 80) keeps going there (its target still beats staying). The
+    kernels plan the same."""
+    case = make_case(np.array([1.0, 0.0, 5.0, 0.0, 0.5, 0.0]), np.array(DEFAULT_WEIGHTS),
+                     np.ones(4, dtype=bool))
+    problem = case.reference
+    start, step, horizon = np.radians([10.0, 10.0]), math.radians(7.5), 48
+    going, better = (Target((math.radians(a), math.radians(b)), 0.0)
+                     for a, b in ((85.0, 80.0), (80.0, 85.0)))
+    costs = [min(r.cost for r in routes(problem, start, step, [t], horizon))
+             for t in (going, better)]
+    assert costs[1] < costs[0] < 1.01 * costs[1]
+    local = 1.0                                   # staying is worse than either travel
+    fresh = plan(problem, start, step, local, [going, better], horizon)
+    kept = plan(problem, start, step, local, [going, better], horizon, going.tilts)
+    assert fresh is not None and fresh.target is better
+    assert kept is not None and kept.target is going
+    rows = np.array([[*going.tilts, 0.0], [*better.tilts, 0.0]])
+    out = np.empty(5)
+    for keep, target in ((NO_KEPT, better), (np.array(going.tilts), going)):
+        assert kplan.plan(case.prob, start, step, local, rows, 2, horizon, keep, out)
+        np.testing.assert_array_equal(out[2:4], target.tilts)

@@ -208,6 +208,54 @@ def test_configurations_cross_controllers_allocators_and_gain_sets() -> None:
         spec.configuration('pd')
 
 
+def test_robot_factors_are_configurations_whose_levels_set_the_robot() -> None:
+    from tiltrov_ros.campaign.plan import Plan, counterfactual
+
+    factors = {'servo_range': {'deg90': {'tilt_min': -90, 'tilt_max': 90},
+                               'deg180': {'tilt_min': -180, 'tilt_max': 180}},
+               'servo_rate': {'slow': {'tilt_rate_limit': 60}}}
+    spec = _spec({'compare': {'controllers': ['pd', 'pid'], 'robot': factors},
+                  'faults': None, 'hold': GOOD['hold'][:2]})
+    assert [c.name for c in spec.configurations] == [
+        'pd-robust-deg90-slow', 'pd-robust-deg180-slow', 'pid-robust-deg90-slow',
+        'pid-robust-deg180-slow']
+    assert spec.factors == (('servo_range', ('deg90', 'deg180')), ('servo_rate', ('slow',)))
+    wide = spec.configuration('pid-robust-deg180-slow')
+    assert wide.levels == ('deg180', 'slow')
+    assert dict(wide.robot) == pytest.approx({'tilt_min': -math.pi, 'tilt_max': math.pi,
+                                              'tilt_rate_limit': 60 * DEG})
+    sample = draw_sample(spec, 0)
+    plan = Plan(spec)
+    narrow, full = (plan.stack(sample, spec.configuration(f'pd-robust-{r}-slow'))
+                    for r in ('deg90', 'deg180'))
+    # The levels go over the drawn servo rate and the robot file; the rest as drawn.
+    assert narrow.robot.tilt_max == pytest.approx(math.pi / 2)
+    assert narrow.robot.tilt_rate_limit == full.robot.tilt_rate_limit == pytest.approx(60 * DEG)
+    assert narrow.robot.max_thrust == full.robot.max_thrust == 35.0
+    assert narrow.scenario == full.scenario
+    # The counterfactual of a run: the same with servos all the way round; none for those.
+    again = counterfactual(narrow)
+    assert again is not None and again.robot == full.robot and again.scenario == narrow.scenario
+    assert counterfactual(full) is None
+    tasks = plan.tasks([sample])
+    assert [t.counterfactual is None for t in tasks] == [False, True, False, True]
+    assert [len(t.bounds) for t in tasks] == [2, 2, 1, 1]      # the pd bound is pd's
+
+
+def test_the_verdict_of_a_run() -> None:
+    from tiltrov_ros.core.campaign import verdict
+
+    reachable = _metrics(steady_shortfall_ratio_full_circle=0.2)
+    hole = _metrics(steady_shortfall_ratio_full_circle=3.0)
+    assert verdict(True, reachable, None) == 'held'
+    assert verdict(False, reachable, True) == 'servo_range'
+    assert verdict(False, hole, True) == 'servo_range'      # past vertical it holds anyway
+    assert verdict(False, hole, False) == verdict(False, hole, None) == 'physics'
+    assert verdict(False, reachable, False) == 'control'
+    assert verdict(False, _metrics(), None) == 'control'    # no oracle: not physics
+    assert verdict(False, None, None) == 'control'          # the run raised
+
+
 def _metrics(**changes: Any) -> dict[str, Any]:
     metrics = copy.deepcopy(dict(metrics_template()))
     for key in ('oscillation_std', 'final_error'):
@@ -285,6 +333,14 @@ def test_settling_time_bounds_are_seconds_even_for_angles() -> None:
     ({'compare': {'gains': {'soft': {'kp': [1, 2]}}}}, 'compare.gains.soft.kp'),
     ({'compare': {'gains': {'soft': {'kq': [1] * 6}}}}, 'compare.gains.soft'),
     ({'compare': {'gains': []}}, 'compare.gains'),
+    ({'compare': {'robot': []}}, 'compare.robot'),
+    ({'compare': {'robot': {'range': {}}}}, 'compare.robot.range'),
+    ({'compare': {'robot': {'range': {'r90': {}}}}}, 'compare.robot.range.r90'),
+    ({'compare': {'robot': {'range': {'r90': {'tilt_mx': 90}}}}}, 'compare.robot.range.r90'),
+    ({'compare': {'robot': {'range': {'r90': {'tilt_max': {'uniform': [80, 90]}}}}}},
+     'compare.robot.range.r90.tilt_max'),
+    ({'compare': {'robot': {'range': {'r 90': {'tilt_max': 90}}}}}, 'compare.robot.range[0]'),
+
     ({'hold': [{'metric': 'final_eror', 'x': 1}]}, 'hold[0].metric'),
     ({'hold': [{'metric': 'final_error'}]}, 'hold[0]'),
     ({'hold': [{'metric': 'final_error', 'front': 1}]}, 'hold[0]'),

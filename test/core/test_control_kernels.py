@@ -86,7 +86,7 @@ def _pair(kind: str, seed: int) -> tuple[object, object]:
     rng = np.random.default_rng(100 + seed)
     gains = Gains(tuple(rng.uniform(1, 500, 6)), tuple(rng.uniform(1, 200, 6)),
                   tuple(rng.uniform(0, 50, 6) * (rng.uniform(size=6) < 0.8)),
-                  tuple(rng.uniform(0.5, 20, 6)))
+                  tuple(rng.uniform(0.5, 20, 6)), antiwindup=float(rng.choice([0.0, 1.0, 3.0])))
     settings = SwitchingSettings(hysteresis=0.3, dwell_time=0.2, settle_time=0.05)
     build = {'pd': lambda: PDController(gains), 'pid': lambda: PIDController(gains, ROBOT),
              'switching': lambda: SwitchingController(gains, settings, ROBOT)}[kind]
@@ -100,21 +100,35 @@ def _pair(kind: str, seed: int) -> tuple[object, object]:
 @pytest.mark.parametrize('kind', ['pd', 'pid', 'switching'])
 @pytest.mark.parametrize('seed', range(4))
 def test_each_law_equals_the_reference_over_a_run_of_updates(kind: str, seed: int) -> None:
+    """With the achieved wrench of the previous command given at most updates: short
+    of it by nothing, by a little (within the tolerance) or by a lot in some DOFs."""
     compiled, reference = _pair(kind, seed)
     rng = np.random.default_rng(seed)
     t = 0.0
+    last = None
+    frozen = 0
     for _ in range(300):
         t += float(rng.choice([0.05, 0.05, 0.0, 0.7, 1.5, -0.1]))
         position, q, nu, ref = _state(rng)
         if rng.uniform() < 0.3:          # near the setpoint: small errors, no saturation
             position, q = ref.position + rng.normal(scale=0.01, size=3), ref.quaternion
-        a = compiled.update(t, position, q, nu, ref)        # type: ignore[attr-defined]
-        b = reference.update(t, position, q, nu, ref)       # type: ignore[attr-defined]
+        achieved = None
+        if last is not None and rng.uniform() < 0.8:
+            short = rng.choice([0.0, 0.01, 5.0], size=6) * rng.normal(size=6)
+            achieved = last - short
+        before = getattr(reference, 'integral', np.zeros(6)).copy()
+        a = compiled.update(t, position, q, nu, ref, achieved=achieved)  # type: ignore[attr-defined]
+        b = reference.update(t, position, q, nu, ref, achieved=achieved)  # type: ignore[attr-defined]
+        last = b.wrench
         _close(a.wrench, b.wrench)
+        if kind == 'pid' and achieved is not None and reference.uses_achieved:  # type: ignore[attr-defined]
+            frozen += int(np.sum(reference.integral == before))  # type: ignore[attr-defined]
         assert (a.mode, a.tilt_request) == (b.mode, b.tilt_request)
         if kind == 'pid':
             _close(compiled.integral, reference.integral)   # type: ignore[attr-defined]
             assert compiled._last_t == reference._last_t    # type: ignore[attr-defined]
+    antiwindup = getattr(reference, 'uses_achieved', False)
+    assert not antiwindup or frozen > 20          # the anti-windup held some DOFs still
 
 
 def test_the_shipped_controllers_accept_sequences_and_refuse_bad_input() -> None:

@@ -403,3 +403,34 @@ def test_load_controller_config_from_a_file(tmp_path: Path) -> None:
     with pytest.raises(ParameterError, match='wrench_controller') as info:
         load_controller_config(path)
     assert str(path) in str(info.value)
+
+
+@pytest.mark.parametrize('compiled', [True, False])
+def test_the_pid_integral_does_not_wind_up_against_a_reported_shortfall(
+        robot, compiled: bool) -> None:
+    """Given what the allocator achieved of its previous wrench, the integral of a DOF
+    holds still while that wrench fell short beyond the tolerance in the direction the
+    error pushes (here +x, 5 N short); it integrates on when the shortfall is small,
+    of the other sign, or not reported."""
+    shipped = load_controller_config().with_kind('pid')
+    assert shipped.gains.antiwindup == 0.0            # off unless asked for
+    config = dataclasses.replace(shipped, gains=dataclasses.replace(shipped.gains,
+                                                                    antiwindup=1.0))
+    ref = Reference.hold((1.0, 0.0, 0.0))            # e_x = 1 m: the integral grows in x
+    cases = {'short in +X': (5.0, False), 'short in -X': (-5.0, True),
+             'within the tolerance': (0.1, True), 'not reported': (None, True)}
+    for name, (short, integrates) in cases.items():
+        pid = make_controller(config, robot)
+        assert isinstance(pid, PIDController)
+        pid.compiled = compiled and pid.compiled
+        first = pid.update(0.0, np.zeros(3), np.array([1.0, 0, 0, 0]), np.zeros(6), ref)
+        achieved = None if short is None else first.wrench - np.array([short, 0, 0, 0, 0, 0])
+        pid.update(0.05, np.zeros(3), np.array([1.0, 0, 0, 0]), np.zeros(6), ref,
+                   achieved=achieved)
+        assert (pid.integral[0] > 0.0) == integrates, name
+        assert pid.integral[0] in (0.0, pytest.approx(0.05))
+    off = make_controller(shipped, robot)                 # off: a shortfall changes nothing
+    first = off.update(0.0, np.zeros(3), np.array([1.0, 0, 0, 0]), np.zeros(6), ref)
+    off.update(0.05, np.zeros(3), np.array([1.0, 0, 0, 0]), np.zeros(6), ref,
+               achieved=first.wrench - np.array([5.0, 0, 0, 0, 0, 0]))
+    assert off.integral[0] == pytest.approx(0.05)    # type: ignore[attr-defined]

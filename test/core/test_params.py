@@ -177,3 +177,19 @@ def test_file_without_robot_block(tmp_path: Path) -> None:
     with pytest.raises(ParameterError, match='no <node>') as info:
         load_robot_params(path)
     assert info.value.source == str(path)
+
+
+def test_the_robot_past_vertical_is_the_papers_robot_but_for_the_servo_range() -> None:
+    """config/robot_past_vertical.yaml: +-180 deg, every other value config/robot.yaml's
+    (and the same control period); found by name or by path."""
+    from tiltrov_ros.core.params import load_control_period, robot_file
+
+    paper = load_robot_params()
+    wide = load_robot_params(robot_file('robot_past_vertical'))
+    assert (wide.tilt_min, wide.tilt_max) == (-math.pi, math.pi)
+    assert dataclasses.replace(wide, tilt_min=paper.tilt_min, tilt_max=paper.tilt_max) == paper
+    assert load_control_period(robot_file('robot_past_vertical')) == load_control_period()
+    path = config_file('robot_past_vertical.yaml')
+    assert robot_file(str(path)) == path and robot_file('robot') == config_file('robot.yaml')
+    with pytest.raises(ParameterError, match="'nonesuch'; allowed: a robot parameter file"):
+        robot_file('nonesuch')

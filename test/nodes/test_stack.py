@@ -9,6 +9,8 @@ each control tick's wrench, thrusts and tilts with the control row.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from ros_stack import (
@@ -93,6 +95,34 @@ def test_lockstep_odometry_equals_the_headless_run(ros, scenario: str, controlle
     else:
         assert run.probe['tilt_request'] == []
     assert run.extra['stalls'] == 0
+
+
+@pytest.mark.slow
+def test_the_pids_anti_windup_keeps_lockstep_equal_to_the_headless_run(ros) -> None:
+    """gains.antiwindup on: the pid reads wrench_achieved, one tick late, and each tick
+    waits for it; the headless runner passes the previous tick's achieved wrench. In
+    current_hold (the current keeps the wrench short) the anti-windup acts: its run
+    differs from the one without."""
+    duration = 3.0
+    options = LaunchOptions(scenario='current_hold', controller='pid', duration=duration,
+                            params=('wrench_controller:gains.antiwindup:=1.0',))
+    run = run_stack(ros.context, ros.executor, options)
+    plain = stack_config('current_hold', 'pid')
+    gains = dataclasses.replace(plain.controller.gains, antiwindup=1.0)
+    config = dataclasses.replace(plain, controller=dataclasses.replace(plain.controller,
+                                                                       gains=gains))
+    log = run_scenario(config, duration=duration)
+    assert run.node(CONTROLLER).controller.uses_achieved
+    ticks = [i * TICK for i in range(round(duration * NS) // TICK)]
+    wrench = run.probe.by_stamp('wrench_cmd')
+    np.testing.assert_allclose(wrench_rows([wrench[t] for t in ticks]), log.wrench_cmd,
+                               rtol=0, atol=ATOL)
+    by_stamp = run.probe.by_stamp('odom')
+    position, _, _ = odom_rows([by_stamp[i * STEP] for i in range(len(log.t))])
+    np.testing.assert_allclose(position, log.position, rtol=0, atol=ATOL)
+    assert run.node(CONTROLLER).achieved_timeouts == 0
+    without = run_scenario(plain, duration=duration)
+    assert np.max(np.abs(without.wrench_cmd - log.wrench_cmd)) > 1e-3
 
 
 @pytest.mark.slow

@@ -52,3 +52,11 @@ def test_robot_state_publisher_gets_the_urdf_of_the_robot_in_use_at_the_step_rat
     assert set(limits) >= set(TILTS)
     assert set(limits.values()) == {config.robot.tilt_rate_limit}
     assert sorted(link.get('name') for link in robot.iter('link'))[-4:] == sorted(THRUSTER_LINKS)
+
+
+def test_the_robot_argument_chooses_the_robot_file() -> None:
+    """robot:=NAME|FILE is --robot of tiltrov launch; empty: config/robot.yaml."""
+    values = {name: default for name, (default, _) in ros_launch.ARGUMENTS.items()}
+    assert ros_launch.options_from(values).robot is None
+    chosen = ros_launch.options_from({**values, 'robot': 'robot_past_vertical'})
+    assert chosen.robot == 'robot_past_vertical'

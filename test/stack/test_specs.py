@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import pytest
 import yaml
 
-from tiltrov_ros.stack.specs import LaunchError, LaunchOptions, namespaced_config, stack_specs
+from tiltrov_ros.core.errors import TiltrovError
+from tiltrov_ros.paths import config_file
+from tiltrov_ros.stack.specs import LaunchOptions, namespaced_config, stack_specs
 
 NODES = ('thrust_allocator', 'wrench_controller', 'reference_publisher', 'plant_simulator')
 
@@ -48,13 +51,28 @@ def test_scenario_file_paths_are_resolved(tmp_path: Path, repo_root: Path) -> No
     assert _spec(specs, 'reference_publisher').overrides['scenario'] == str(scenario)
 
 
+def test_a_robot_file_reaches_every_node_and_the_run(tmp_path: Path) -> None:
+    """--robot (robot:= in the launch file): a shipped name or a path; every node gets
+    that file in place of config/robot.yaml, in a namespace too (under its own name)."""
+    specs, config, _ = stack_specs(LaunchOptions(duration=1.0, robot='robot_past_vertical'))
+    wide = config_file('robot_past_vertical.yaml').resolve()
+    assert all(s.params_files[0] == wide for s in specs)
+    assert (config.robot.tilt_min, config.robot.tilt_max) == pytest.approx((-math.pi, math.pi))
+    namespaced_config(specs, '/robot1', tmp_path)
+    specs, config, _ = stack_specs(LaunchOptions(duration=1.0, robot=str(wide)),
+                                   config_dir=tmp_path)
+    assert all(s.params_files[0] == tmp_path / 'robot_past_vertical.yaml' for s in specs)
+    assert config.robot.tilt_max == pytest.approx(math.pi)
+
+
 @pytest.mark.parametrize(('options', 'message'), [
+    (LaunchOptions(robot='no_such_robot'), "'no_such_robot'; allowed: a robot parameter file"),
     (LaunchOptions(duration=0.015), 'whole number'),
     (LaunchOptions(params=('wrench_controller:gains.kp',)), 'NODE:NAME:=VALUE'),
     (LaunchOptions(params=('nobody:x:=1',)), 'unknown node'),
 ])
 def test_bad_options_are_refused_before_anything_starts(options, message) -> None:
-    with pytest.raises(LaunchError, match=message):
+    with pytest.raises(TiltrovError, match=message):
         stack_specs(options)
 
 

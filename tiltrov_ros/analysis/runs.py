@@ -22,6 +22,7 @@ from tiltrov_ros.core.names import (
     WRENCH_DOFS,
     WRENCH_UNITS,
 )
+from tiltrov_ros.core.params import robot_file
 from tiltrov_ros.core.runlog import RunLog
 from tiltrov_ros.core.runner import StackConfig, run_scenario, stack_config
 from tiltrov_ros.progress import ProgressBar
@@ -37,12 +38,14 @@ def one_line(exc: BaseException) -> str:
 
 
 def resolve(scenario: str, controller: str | None, allocator: str | None, *,
-            controller_file: Path | None = None,
-            allocator_file: Path | None = None) -> StackConfig:
-    """A StackConfig, or :class:`InputError` for anything wrong in the input files."""
+            controller_file: Path | None = None, allocator_file: Path | None = None,
+            robot: str | None = None) -> StackConfig:
+    """A StackConfig, or :class:`InputError` for anything wrong in the input files.
+    ``robot``: a robot parameter file or the name of a shipped one (default: robot.yaml)."""
     try:
         return stack_config(scenario, controller, allocator_mode=allocator,
-                            controller_file=controller_file, allocator_file=allocator_file)
+                            controller_file=controller_file, allocator_file=allocator_file,
+                            robot_file=robot_file(robot) if robot else None)
     except (TiltrovError, yaml.YAMLError, OSError) as exc:
         raise InputError(one_line(exc)) from exc
 

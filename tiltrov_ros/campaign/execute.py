@@ -32,6 +32,7 @@ from distributed import Client, LocalCluster, as_completed
 
 from tiltrov_ros.campaign.plan import RunTask
 from tiltrov_ros.campaign.worker import RunResult, run_batch, worker_environment
+from tiltrov_ros.core.campaign import verdict
 from tiltrov_ros.core.errors import CampaignError
 
 #: Environment of local worker processes: numpy's BLAS single-threaded, so one
@@ -160,7 +161,8 @@ def execute(client: Any, tasks: Sequence[RunTask],
                 results = future.result()
             except Exception as exc:    # the batch was lost (its worker died, ...)
                 reason = f'batch lost: {type(exc).__name__}: {" ".join(str(exc).split())}'
-                results = [RunResult(t.run_id, None, reason[:500], 0.0, '') for t in batch]
+                results = [RunResult(t.run_id, None, reason[:500], 0.0, '',
+                                     verdict=verdict(False, None, None)) for t in batch]
             future.release()
             on_results(results)
     finally:

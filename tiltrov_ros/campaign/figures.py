@@ -5,7 +5,9 @@
   the axis, so a curve that ends below 1 shows them;
 * ``error_vs_current.png``: the final position error of every run against the
   mean current's speed and its direction (deg from north towards east), one
-  marker per configuration, hollow for the runs that do not hold.
+  marker per configuration, hollow for the runs that do not hold;
+* ``verdicts.png``: per configuration, the runs that hold and those that do
+  not by verdict (servo range, physics, control), stacked.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ import numpy as np
 
 from tiltrov_ros.campaign.summary import final_position_error
 from tiltrov_ros.campaign.table import PARAM, number
+from tiltrov_ros.core.campaign import VERDICTS
 
 _MARKERS = 'os^vD<>p'
 _FLOOR_MM = 1e-3        # errors below are drawn here (log axes)
@@ -80,13 +83,42 @@ def current_figure(rows: Sequence[Mapping[str, str]], names: Sequence[str]) -> F
     return fig
 
 
+#: Colours of the verdicts (held, servo range, physics, control).
+_VERDICT_COLORS = ('#4c9a2a', '#3b75af', '#999999', '#c0392b')
+
+
+def verdict_figure(rows: Sequence[Mapping[str, str]], names: Sequence[str]) -> Figure:
+    fig = Figure(figsize=(max(6.0, 0.75 * len(names) + 2.5), 4.8))
+    ax = fig.add_subplot()
+    groups = _by_configuration(rows, names)
+    x = np.arange(len(names))
+    bottom = np.zeros(len(names))
+    held = []
+    for verdict, color in zip(VERDICTS, _VERDICT_COLORS):
+        counts = np.array([sum(r['verdict'] == verdict for r in groups[n]) for n in names])
+        ax.bar(x, counts, bottom=bottom, color=color, label=verdict.replace('_', ' '))
+        bottom += counts
+        held = held or list(counts)
+    # The axis starts below the fewest runs held: the failures are the point.
+    ax.set_ylim(max(0.0, min(held, default=0) - 0.1 * max(bottom, default=1)),
+                max(bottom, default=1) * 1.01)
+    ax.set_xticks(x, names, rotation=40, ha='right')
+    ax.set_ylabel('runs (axis cut below)')
+    ax.grid(True, axis='y', alpha=0.3)
+    ax.legend(loc='upper center', bbox_to_anchor=(0.5, 1.12), ncol=len(VERDICTS),
+              frameon=False)
+    fig.tight_layout()
+    return fig
+
+
 def write_figures(rows: Sequence[Mapping[str, str]], names: Sequence[str], out: Path, *,
                   dpi: int = 100) -> list[Path]:
-    """Both figures into ``out``; their paths."""
+    """The figures into ``out``; their paths."""
     out.mkdir(parents=True, exist_ok=True)
     written = []
     for stem, fig in (('cdf_final_position', cdf_figure(rows, names)),
-                      ('error_vs_current', current_figure(rows, names))):
+                      ('error_vs_current', current_figure(rows, names)),
+                      ('verdicts', verdict_figure(rows, names))):
         path = out / f'{stem}.png'
         fig.savefig(path, dpi=dpi, metadata=_PNG_METADATA)
         written.append(path)

@@ -10,44 +10,66 @@ but none of the files. No Dask here.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 import shlex
+import shutil
 from typing import Any, NamedTuple
 
 import yaml
 
 from tiltrov_ros.core.allocation import AllocatorConfig, load_allocator_config
-from tiltrov_ros.core.campaign import CampaignSpec, Configuration, Sample, draw_sample
+from tiltrov_ros.core.campaign import Bound, CampaignSpec, Configuration, Sample, draw_sample
 from tiltrov_ros.core.controllers import ControllerConfig, Gains, load_controller_config
 from tiltrov_ros.core.errors import CampaignError, TiltrovError
-from tiltrov_ros.core.params import load_control_period, load_robot_params
+from tiltrov_ros.core.params import RobotParams, load_control_period, load_robot_params
 from tiltrov_ros.core.runner import StackConfig
+from tiltrov_ros.core.steady import FULL_CIRCLE
+
+#: The name of a campaign's ``--robot`` file in an exported run's folder.
+ROBOT_COPY = 'robot.yaml'
 
 
 class RunTask(NamedTuple):
-    """One run: its id (``s00042-pid-robust``), sample index, configuration name and
-    the resolved stack it runs."""
+    """One run: its id (``s00042-pid-robust``), sample index, configuration name, the
+    resolved stack it runs, the hold bounds that apply to it and, for the verdict of a
+    run that does not hold, the same stack with servos turning all the way round (None
+    when they already do: :func:`counterfactual`)."""
 
     run_id: str
     sample: int
     configuration: str
     config: StackConfig
+    bounds: tuple[Bound, ...] = ()
+    counterfactual: StackConfig | None = None
 
 
 def run_id(sample: int, configuration: str) -> str:
     return f's{sample:05d}-{configuration}'
 
 
+def counterfactual(config: StackConfig) -> StackConfig | None:
+    """``config`` with the servos' range the full circle and nothing else changed, or
+    None when it already is."""
+    robot = config.robot
+    if (robot.tilt_min, robot.tilt_max) == FULL_CIRCLE:
+        return None
+    return replace(config, robot=replace(robot, tilt_min=FULL_CIRCLE[0],
+                                         tilt_max=FULL_CIRCLE[1]))
+
+
 class Plan:
     """The campaign's configurations resolved against the shipped files."""
 
-    def __init__(self, spec: CampaignSpec) -> None:
+    def __init__(self, spec: CampaignSpec, robot_file: Path | None = None) -> None:
+        """``robot_file``: the robot every sample starts from (default: the shipped
+        config/robot.yaml; the samples' drawn keys and the factors' levels go over it)."""
         self.spec = spec
+        self.robot_file = robot_file
         where = spec.source or 'campaign'
         try:
-            self.robot = load_robot_params()
-            self.control_period = load_control_period()
+            self.robot = load_robot_params(robot_file)
+            self.control_period = load_control_period(robot_file)
             shipped_controller = load_controller_config()
             shipped_allocator = load_allocator_config()
         except (TiltrovError, OSError) as exc:
@@ -75,6 +97,9 @@ class Plan:
         scenario = sample.scenario(where)
         try:
             robot = scenario.robot(self.robot)
+            if configuration.robot:
+                robot = RobotParams.from_mapping({**robot.as_dict(), **dict(configuration.robot)},
+                                                 source=f'{where}, {configuration.name}')
         except TiltrovError as exc:
             raise CampaignError(' '.join(str(exc).split())) from exc
         return StackConfig(scenario, robot, self.controllers[configuration.name],
@@ -82,8 +107,13 @@ class Plan:
 
     def tasks(self, samples: Sequence[Sample]) -> list[RunTask]:
         """Every run of ``samples``: sample-major, configurations in the file's order."""
-        return [RunTask(run_id(s.index, c.name), s.index, c.name, self.stack(s, c))
-                for s in samples for c in self.spec.configurations]
+        out = []
+        for s in samples:
+            for c in self.spec.configurations:
+                stack = self.stack(s, c)
+                out.append(RunTask(run_id(s.index, c.name), s.index, c.name, stack,
+                                   self.spec.bounds(c), counterfactual(stack)))
+        return out
 
     def export(self, sample: int, configuration: str, folder: Path) -> list[Path]:
         """The files that run ``(sample, configuration)`` again with ``tiltrov sim``:
@@ -91,6 +121,11 @@ class Plan:
         reproduce.sh (one command; its metrics.json lands in ``sim/``)."""
         config = self.spec.configuration(configuration)
         drawn = draw_sample(self.spec, sample)
+        document = dict(drawn.document)
+        if config.robot:        # the factors' levels, over the drawn keys (SI units, rad)
+            document['robot'] = {**(document.get('robot') or {}),
+                                 **{k: list(v) if isinstance(v, tuple) else v
+                                    for k, v in config.robot}}
         folder.mkdir(parents=True, exist_ok=True)
         header = (f'# {run_id(sample, configuration)}: sample {sample} of campaign '
                   f'{self.spec.name} (seed {self.spec.seed}), as `tiltrov campaign` ran it\n')
@@ -98,7 +133,7 @@ class Plan:
         ros_controller = {'controller': controller.kind, 'gains': _plain(asdict(controller.gains)),
                           'switching': _plain(asdict(controller.switching))}
         files = {
-            'scenario.yaml': drawn.document,
+            'scenario.yaml': document,
             'wrench_controller.yaml': {'wrench_controller': {'ros__parameters': ros_controller}},
             'thrust_allocator.yaml': {'thrust_allocator': {
                 'ros__parameters': _plain(asdict(self.allocators[configuration]))}},
@@ -108,7 +143,10 @@ class Plan:
             path = folder / name
             path.write_text(header + yaml.safe_dump(doc, sort_keys=False), encoding='utf-8')
             written.append(path)
-        command = reproduce_command(config)
+        if self.robot_file is not None:
+            written.append(folder / ROBOT_COPY)
+            shutil.copyfile(self.robot_file, written[-1])
+        command = reproduce_command(config, self.robot_file is not None)
         script = folder / 'reproduce.sh'
         script.write_text(f'#!/bin/sh\n{header}cd "$(dirname "$0")" && exec {command} "$@"\n',
                           encoding='utf-8')
@@ -116,12 +154,14 @@ class Plan:
         return [*written, script]
 
 
-def reproduce_command(config: Configuration) -> str:
-    """The ``tiltrov sim`` command of a run, from inside its exported folder."""
+def reproduce_command(config: Configuration, robot_file: bool = False) -> str:
+    """The ``tiltrov sim`` command of a run, from inside its exported folder
+    (``robot_file``: with the campaign's ``--robot`` file, copied as robot.yaml)."""
     return shlex.join(['tiltrov', 'sim', '--scenario', 'scenario.yaml',
                        '--controller', config.controller, '--allocator', config.allocator,
                        '--controller-file', 'wrench_controller.yaml',
-                       '--allocator-file', 'thrust_allocator.yaml', '--out', 'sim'])
+                       '--allocator-file', 'thrust_allocator.yaml',
+                       *(['--robot', ROBOT_COPY] if robot_file else []), '--out', 'sim'])
 
 
 def _plain(values: dict[str, Any]) -> dict[str, Any]:

@@ -7,7 +7,11 @@ and percentiles (50, 90, 95, max) over the runs that did not fail of
 * the final position error, |(final_error.x, .y, .z)|, mm;
 * the final attitude error, the largest of final_error.roll, .pitch, .yaw, deg;
 
-and the worst runs: failed ones first, then by final position error.
+and the worst runs: failed ones first, then by final position error. The runs
+that do not hold are counted by verdict (``servo_range``, ``physics``,
+``control``: :func:`tiltrov_ros.core.campaign.verdict`) and the worst of each
+verdict listed; with robot factors (``compare.robot``) a table compares the
+levels of the last factor side by side.
 """
 
 from __future__ import annotations
@@ -22,8 +26,8 @@ from typing import Any
 import numpy as np
 
 from tiltrov_ros.campaign.table import number
-from tiltrov_ros.core.campaign import Bound, CampaignSpec
-from tiltrov_ros.core.campaign.spec import TIME_METRICS
+from tiltrov_ros.core.campaign import VERDICTS, Bound, CampaignSpec
+from tiltrov_ros.core.campaign.spec import HELD, TIME_METRICS
 from tiltrov_ros.core.names import DOF_NAMES
 
 PERCENTILES = (50, 90, 95, 100)
@@ -51,6 +55,7 @@ class ConfigSummary:
     position_mm: dict[str, float | None]     # 'p50', 'p90', 'p95', 'max'
     attitude_deg: dict[str, float | None]
     worst: list[str]                          # run ids
+    verdicts: dict[str, int]                  # runs that do not hold, by verdict
 
 
 def _percentiles(values: Sequence[float], scale: float) -> dict[str, float | None]:
@@ -84,8 +89,54 @@ def summarize(spec: CampaignSpec, rows: Sequence[Mapping[str, str]], *,
                                  holds / len(mine) if mine else None,
                                  _percentiles(positions, 1e3),
                                  _percentiles(attitudes, 180.0 / math.pi),
-                                 [r['run_id'] for r in ranked]))
+                                 [r['run_id'] for r in ranked],
+                                 {v: sum(r['verdict'] == v for r in mine)
+                                  for v in VERDICTS if v != HELD}))
     return out
+
+
+def worst_by_verdict(rows: Sequence[Mapping[str, str]], worst: int = 5
+                     ) -> dict[str, list[Mapping[str, str]]]:
+    """The ``worst`` worst runs of each verdict but ``held`` (:func:`_worst_first`)."""
+    return {v: sorted((r for r in rows if r['verdict'] == v), key=_worst_first)[:worst]
+            for v in VERDICTS if v != HELD}
+
+
+def factor_rows(spec: CampaignSpec, summaries: Sequence[ConfigSummary]) -> list[list[str]]:
+    """The runs that hold per level of the last robot factor (columns) and everything
+    else of the configuration (rows), header first; empty without factors."""
+    if not spec.factors:
+        return []
+    factor, levels = spec.factors[-1]
+    by_name = {s.configuration: s for s in summaries}
+    rows: dict[str, list[str]] = {}
+    for config in spec.configurations:
+        stem = config.name.removesuffix(f'-{config.levels[-1]}')
+        summary = by_name[config.name]
+        rows.setdefault(stem, [stem]).append(
+            f'{summary.holds} of {summary.runs}' if summary.runs else '-')
+    return [[f'configuration / {factor}', *levels], *rows.values()]
+
+
+#: What the verdicts mean, in summary.md.
+VERDICT_TEXT = (
+    'A run that does not hold gets a verdict: **servo_range** when the same run with the '
+    'servos turning all the way round (+-180 deg, nothing else changed) holds; '
+    '**physics** when no tilt on the full circle produces the wrench that holds the '
+    'final setpoint against the mean current (the steady-wrench oracle, short by more '
+    'than the wrench tolerance); **control** otherwise (the controller\'s or the '
+    'allocator\'s doing). docs/campaign.md, "Verdicts".')
+
+
+def _errors(row: Mapping[str, str]) -> str:
+    """'final position [mm] | final attitude [deg]' cells of a row."""
+    pos, att = final_position_error(row), final_attitude_error(row)
+    return (f'{_fmt(None if pos is None else 1e3 * pos)} | '
+            f'{_fmt(None if att is None else math.degrees(att), 2)}')
+
+
+def _missed(row: Mapping[str, str]) -> str:
+    return (row['error'] or _shorten(row['violations']) or '-').replace('|', '/')
 
 
 def describe_bound(bound: Bound) -> str:
@@ -120,11 +171,14 @@ def _fmt(value: float | None, digits: int = 1) -> str:
 
 def comparison_rows(summaries: Sequence[ConfigSummary]) -> list[list[str]]:
     """The comparison table, header first (text cells)."""
+    verdicts = [v for v in VERDICTS if v != HELD]
     header = ['configuration', 'runs', 'failed', 'hold', 'hold rate',
+              *(v.replace('_', ' ') for v in verdicts),
               'pos p50 [mm]', 'pos p90 [mm]', 'pos p95 [mm]', 'pos max [mm]',
               'att p50 [deg]', 'att p90 [deg]', 'att max [deg]']
     body = [[s.configuration, str(s.runs), str(s.failed), str(s.holds),
              '-' if s.hold_rate is None else f'{100 * s.hold_rate:.0f} %',
+             *(str(s.verdicts[v]) for v in verdicts),
              *(_fmt(s.position_mm[k]) for k in ('p50', 'p90', 'p95', 'max')),
              *(_fmt(s.attitude_deg[k], 2) for k in ('p50', 'p90', 'max'))]
             for s in summaries]
@@ -156,20 +210,36 @@ def write_summary(spec: CampaignSpec, rows: Sequence[Mapping[str, str]],
              markdown_table(table), '',
              'A run holds when it did not fail and meets every bound:', '']
     lines += [f'- {describe_bound(b)}' for b in spec.hold] or ['- (no bounds given)']
+    lines += ['', VERDICT_TEXT]
+    factors = factor_rows(spec, summaries)
+    if factors:
+        lines += ['', '## Robot factors', '', 'Runs that hold:', '', markdown_table(factors)]
     lines += ['', '## Worst runs', '',
-              '| run | status | holds | final position [mm] | final attitude [deg] | '
-              'missed | files |', '|---|---|---|---|---|---|---|']
+              '| run | status | holds | verdict | final position [mm] | final attitude [deg] '
+              '| missed | files |', '|---|---|---|---|---|---|---|---|']
     for summary in summaries:
         for run_id in summary.worst:
             row = by_id[run_id]
-            pos, att = final_position_error(row), final_attitude_error(row)
-            missed = row['error'] or _shorten(row['violations']) or '-'
             folder = exported.get(run_id)
             where = f'{folder.relative_to(out).as_posix()}/' if folder else '-'
-            lines.append(f'| {run_id} | {row["status"]} | {row["holds"]} | '
-                         f'{_fmt(None if pos is None else 1e3 * pos)} | '
-                         f'{_fmt(None if att is None else math.degrees(att), 2)} | '
-                         f'{missed.replace("|", "/")} | {where} |')
+            lines.append(f'| {run_id} | {row["status"]} | {row["holds"]} | {row["verdict"]} | '
+                         f'{_errors(row)} | {_missed(row)} | {where} |')
+    lines += ['', '## Failures by verdict', '']
+    for name, worst_rows in worst_by_verdict(rows, len(summaries[0].worst)
+                                             if summaries else 0).items():
+        count = sum(r['verdict'] == name for r in rows)
+        lines += [f'**{name}**: {count} run(s)' + (', the worst:' if worst_rows else '.'), '']
+        if worst_rows:
+            lines += ['| run | final position [mm] | final attitude [deg] | steady wrench '
+                      'short (x tolerance) | missed | servos +-180 deg |',
+                      '|---|---|---|---|---|---|']
+            for row in worst_rows:
+                ratio = row.get('steady_shortfall_ratio_full_circle', '')
+                again = {'1': 'holds', '0': 'misses', '': '-'}[row['counterfactual_holds']]
+                lines.append(f'| {row["run_id"]} | {_errors(row)} | '
+                             f'{_fmt(None if ratio == "" else float(ratio), 2)} | '
+                             f'{_missed(row)} | {again} |')
+            lines.append('')
     if exported:
         lines += ['', 'Each folder holds the scenario file, the controller and allocator '
                   'parameter files and reproduce.sh, the `tiltrov sim` command that runs it '
@@ -182,7 +252,11 @@ def write_summary(spec: CampaignSpec, rows: Sequence[Mapping[str, str]],
     doc: dict[str, Any] = {
         'campaign': spec.name, 'seed': spec.seed, 'samples': samples, 'runs': len(rows),
         'hold': [describe_bound(b) for b in spec.hold],
-        'configurations': [asdict(s) for s in summaries]}
+        'configurations': [asdict(s) for s in summaries],
+        'factors': {name: list(levels) for name, levels in spec.factors},
+        'worst_by_verdict': {v: [r['run_id'] for r in worst]
+                             for v, worst in worst_by_verdict(
+                                 rows, len(summaries[0].worst) if summaries else 0).items()}}
     js = out / 'summary.json'
     js.write_text(json.dumps(doc, indent=2, allow_nan=False) + '\n', encoding='utf-8')
     return [md, js]

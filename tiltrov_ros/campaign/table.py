@@ -6,8 +6,13 @@ Columns, in order:
   ``controller``, ``allocator``, ``gains``;
 * ``status`` (``ok`` or ``failed``: the run raised), ``holds`` (1 or 0, by the
   campaign's ``hold`` bounds; a failed run does not hold), ``violations`` (the
-  bounds it missed, ``; ``-separated), ``error`` (the exception of a failed run),
-  ``seconds`` (its wall time on the worker), ``worker`` (host:pid);
+  bounds it missed, ``; ``-separated), ``verdict`` (``held``, ``servo_range``,
+  ``physics``, ``control``: :func:`tiltrov_ros.core.campaign.verdict`),
+  ``counterfactual_holds`` (1 or 0: the same run with servos at +-180 deg, run
+  for the runs that do not hold; empty when not run) and
+  ``counterfactual_violations``, ``error`` (the exception of a failed run),
+  ``seconds`` (its wall time on the worker, the counterfactual's included),
+  ``worker`` (host:pid);
 * ``param.<key>``: the sample's parameters
   (:attr:`tiltrov_ros.core.campaign.Sample.params`);
 * every key of ``metrics.json``, nested keys joined by dots
@@ -33,7 +38,8 @@ from tiltrov_ros.core.yamlfile import flatten
 
 TABLE = 'runs.csv'
 RUN_COLUMNS = ('run_id', 'sample', 'configuration', 'controller', 'allocator', 'gains',
-               'status', 'holds', 'violations', 'error', 'seconds', 'worker')
+               'status', 'holds', 'violations', 'verdict', 'counterfactual_holds',
+               'counterfactual_violations', 'error', 'seconds', 'worker')
 #: Columns that depend on where and when a run ran, not on what it computed.
 TIMING_COLUMNS = ('seconds', 'worker')
 PARAM = 'param.'

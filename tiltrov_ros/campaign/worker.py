@@ -1,8 +1,12 @@
 """What a worker does with a batch of runs: run each headless, return its metrics.
 
 A run that raises is a result too (its ``error``), never a lost batch; the
-RunLog stays on the worker, only ``metrics.json`` comes back. No Dask here:
-the serial baseline of the benchmark calls the same :func:`run_batch`.
+RunLog stays on the worker, only ``metrics.json`` comes back, with the hold
+bounds it misses and its verdict (:func:`tiltrov_ros.core.campaign.verdict`):
+a run that does not hold is run again with servos turning all the way round
+(the task's ``counterfactual``, nothing else changed), and whether that one
+holds is part of the result. No Dask here: the serial baseline of the
+benchmark calls the same :func:`run_batch`.
 """
 
 from __future__ import annotations
@@ -14,31 +18,52 @@ import time
 from typing import Any, NamedTuple
 
 from tiltrov_ros.campaign.plan import RunTask
+from tiltrov_ros.core.campaign import verdict, violations
 from tiltrov_ros.core.metrics import compute_metrics
-from tiltrov_ros.core.runner import run_scenario
+from tiltrov_ros.core.runner import StackConfig, run_scenario
 
 
 class RunResult(NamedTuple):
     """One run's outcome: metrics (None if it raised), the error's one line, the wall
-    time it took on its worker (s) and the worker (host:pid)."""
+    time it took on its worker (s, its counterfactual included) and the worker
+    (host:pid); the hold bounds it misses, its verdict, and whether its counterfactual
+    held (None: not run) with the bounds that one missed."""
 
     run_id: str
     metrics: dict[str, Any] | None
     error: str
     seconds: float
     worker: str
+    violations: tuple[str, ...] = ()
+    verdict: str = ''
+    counterfactual_holds: bool | None = None
+    counterfactual_violations: tuple[str, ...] = ()
+
+
+def _metrics(config: StackConfig) -> tuple[dict[str, Any] | None, str]:
+    """A run's metrics, or None and the exception's one line."""
+    try:
+        return compute_metrics(run_scenario(config)), ''
+    except Exception as exc:    # a run that fails is recorded, the campaign goes on
+        return None, f'{type(exc).__name__}: {" ".join(str(exc).split())}'[:500]
 
 
 def run_one(task: RunTask) -> RunResult:
-    """Run one task; any exception becomes the result's ``error``."""
+    """Run one task (and its counterfactual when it does not hold); any exception
+    becomes the result's ``error``."""
     start = time.perf_counter()
-    metrics: dict[str, Any] | None = None
-    error = ''
-    try:
-        metrics = compute_metrics(run_scenario(task.config))
-    except Exception as exc:    # a run that fails is recorded, the campaign goes on
-        error = f'{type(exc).__name__}: {" ".join(str(exc).split())}'[:500]
-    return RunResult(task.run_id, metrics, error, time.perf_counter() - start, worker_name())
+    metrics, error = _metrics(task.config)
+    missed = tuple(violations(task.bounds, metrics)) if metrics is not None else ()
+    holds = metrics is not None and not missed
+    again: bool | None = None
+    missed_again: tuple[str, ...] = ()
+    if not holds and task.counterfactual is not None:
+        other, other_error = _metrics(task.counterfactual)
+        missed_again = (tuple(violations(task.bounds, other)) if other is not None
+                        else (other_error,))
+        again = other is not None and not missed_again
+    return RunResult(task.run_id, metrics, error, time.perf_counter() - start, worker_name(),
+                     missed, verdict(holds, metrics, again), again, missed_again)
 
 
 def run_batch(tasks: Sequence[RunTask]) -> list[RunResult]:

@@ -6,6 +6,7 @@
     tiltrov campaign FILE --out DIR --resume                  # finish an interrupted one
     tiltrov campaign FILE --out DIR --scheduler tcp://HOST:8786   # on a Dask cluster
     tiltrov campaign FILE --out DIR --export s00042-pid-robust    # that run's files
+    tiltrov campaign FILE --out DIR --robot robot_past_vertical   # another robot file
 
 Into ``DIR``: ``runs.csv`` (one row per run, appended as runs finish:
 :mod:`tiltrov_ros.campaign.table`), ``campaign.yaml`` (the campaign file as
@@ -39,6 +40,7 @@ from tiltrov_ros.campaign.table import PARAM, TABLE, RunTable, columns, read_tab
 from tiltrov_ros.campaign.worker import RunResult
 from tiltrov_ros.core.campaign import CampaignSpec, Sample, draw_samples, load_campaign
 from tiltrov_ros.core.errors import TiltrovError
+from tiltrov_ros.core.params import robot_file
 from tiltrov_ros.core.yamlfile import flatten
 from tiltrov_ros.progress import ProgressBar
 
@@ -52,6 +54,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help='campaign file (YAML; e.g. config/campaigns/station_keeping.yaml)')
     parser.add_argument('--out', type=Path, required=True, metavar='DIR',
                         help='output directory: runs.csv, summary, figures, worst runs')
+    parser.add_argument('--robot', metavar='FILE',
+                        help='robot parameter file (or the name of a shipped one, e.g. '
+                             'robot_past_vertical) every sample starts from (default: '
+                             'config/robot.yaml)')
     parser.add_argument('--samples', type=int, metavar='N',
                         help="number of samples (default: the file's); sample i is the same "
                              'whatever N is')
@@ -73,24 +79,27 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--no-figures', action='store_true', help='skip the PNG figures')
 
 
-def fingerprint(spec: CampaignSpec) -> str:
+def fingerprint(spec: CampaignSpec, robot: Path | None = None) -> str:
     """What must not change between a campaign and its --resume: the file's content
-    (less ``samples``) and its base scenarios."""
+    (less ``samples``), its base scenarios and the ``--robot`` file's content."""
     assert spec.source is not None
     doc = yaml.safe_load(Path(spec.source).read_text(encoding='utf-8'))
     doc.pop('samples', None)
-    text = json.dumps({'campaign': doc, 'bases': [dict(d) for _, d in spec.bases]},
-                      sort_keys=True, default=str)
+    content: dict[str, Any] = {'campaign': doc, 'bases': [dict(d) for _, d in spec.bases]}
+    if robot is not None:
+        content['robot'] = robot.read_text(encoding='utf-8')
+    text = json.dumps(content, sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-def _check_out(spec: CampaignSpec, out: Path, resume: bool) -> None:
+def _check_out(spec: CampaignSpec, out: Path, resume: bool, robot: Path | None) -> None:
     marker = out / 'campaign.json'
-    digest = fingerprint(spec)
+    digest = fingerprint(spec, robot)
     if resume and marker.is_file():
         if json.loads(marker.read_text(encoding='utf-8')).get('fingerprint') != digest:
             raise InputError(f'{out} holds a campaign made from another campaign file (or '
-                             f'other base scenarios) than {spec.source}; use another --out')
+                             f'other base scenarios, another --robot) than {spec.source}; use '
+                             'another --out')
     out.mkdir(parents=True, exist_ok=True)
     if not (resume and marker.is_file()):
         marker.write_text(json.dumps({'campaign': spec.name, 'fingerprint': digest}) + '\n',
@@ -106,10 +115,11 @@ def _row(task: RunTask, sample: Sample, spec: CampaignSpec, result: RunResult
         'run_id': task.run_id, 'sample': task.sample, 'configuration': config.name,
         'controller': config.controller, 'allocator': config.allocator, 'gains': config.gains,
         'status': 'ok' if result.metrics is not None else 'failed', 'error': result.error,
-        'seconds': round(result.seconds, 4), 'worker': result.worker}
-    violations = spec.violations(config, result.metrics) if result.metrics is not None else []
-    row['holds'] = int(result.metrics is not None and not violations)
-    row['violations'] = '; '.join(violations)
+        'seconds': round(result.seconds, 4), 'worker': result.worker,
+        'verdict': result.verdict, 'counterfactual_holds': result.counterfactual_holds,
+        'counterfactual_violations': '; '.join(result.counterfactual_violations)}
+    row['holds'] = int(result.metrics is not None and not result.violations)
+    row['violations'] = '; '.join(result.violations)
     row.update({PARAM + k: v for k, v in sample.params.items()})
     row.update(flatten(result.metrics or {}))
     return row
@@ -188,8 +198,9 @@ def _summarize(args: argparse.Namespace, spec: CampaignSpec, plan: Plan, samples
     print(text_table(comparison_rows(summaries)))
     for summary in summaries:
         rate = '-' if summary.hold_rate is None else f'{100 * summary.hold_rate:.0f} %'
+        why = ', '.join(f'{n} {v.replace("_", " ")}' for v, n in summary.verdicts.items())
         print(f'hold rate {summary.configuration}: {rate} ({summary.holds} of {summary.runs}'
-              f' runs, {summary.failed} failed)')
+              f' runs, {summary.failed} failed; not held: {why})')
     return written
 
 
@@ -221,14 +232,15 @@ def _run(args: argparse.Namespace) -> int:
     try:
         spec = load_campaign(args.file)
         count = args.samples or spec.samples
-        plan = Plan(spec)
+        robot = robot_file(args.robot) if args.robot else None
+        plan = Plan(spec, robot)
         if args.export:
             print_written(_export(args, spec, plan), args.out)
             return 0
         _check_dask()
         samples = draw_samples(spec, count)
         tasks = plan.tasks(samples)
-        _check_out(spec, args.out, args.resume)
+        _check_out(spec, args.out, args.resume, robot)
         table = RunTable(args.out / TABLE, columns(samples[0].params), resume=args.resume)
     except TiltrovError as exc:
         raise InputError(one_line(exc)) from exc

@@ -24,6 +24,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="allocation mode (default: config/thrust_allocator.yaml's, robust)")
     parser.add_argument('--duration', type=float, default=None, metavar='SEC',
                         help="sim time to run, s (default: the scenario's)")
+    parser.add_argument('--robot', default=None, metavar='NAME|FILE',
+                        help='robot parameter file, or the name of a shipped one '
+                             '(robot_past_vertical: servos past vertical; default: '
+                             'config/robot.yaml, the paper\'s +-90 deg)')
     timing = parser.add_mutually_exclusive_group()
     timing.add_argument('--lockstep', dest='lockstep', action='store_true', default=True,
                         help='deterministic, as fast as possible (default)')
@@ -63,7 +67,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def options_from_args(args: argparse.Namespace) -> LaunchOptions:
     return LaunchOptions(
         scenario=args.scenario, controller=args.controller, allocator=args.allocator,
-        duration=args.duration, lockstep=args.lockstep,
+        duration=args.duration, robot=args.robot, lockstep=args.lockstep,
         real_time_factor=args.real_time_factor, record=args.record,
         single_process=args.single_process, namespace=args.namespace,
         params=tuple(args.param), stall_timeout=args.stall_timeout, executor=args.executor,

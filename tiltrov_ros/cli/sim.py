@@ -5,6 +5,7 @@
     tiltrov sim --scenario pitch_hold --controller pd --out runs/sim
     tiltrov sim --scenario trajectory --compare            # pd, pid and switching overlaid
     tiltrov sim --scenario my_dive.yaml --duration 20 --allocator paper
+    tiltrov sim --scenario current_hold --robot robot_past_vertical   # servos past vertical
 
 One run writes into ``--out``: ``run.npz`` (the whole RunLog,
 :meth:`RunLog.save_npz`), ``control.csv`` (the control grid, one row per tick,
@@ -54,6 +55,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help='wrench_controller parameter file (default: the shipped one)')
     parser.add_argument('--allocator-file', type=Path, metavar='FILE',
                         help='thrust_allocator parameter file (default: the shipped one)')
+    parser.add_argument('--robot', metavar='NAME|FILE',
+                        help='robot parameter file, or the name of a shipped one '
+                             '(robot_past_vertical: servos past vertical; default: '
+                             "config/robot.yaml, the paper's +-90 deg)")
     parser.add_argument('--duration', type=float, metavar='SEC',
                         help="simulated seconds (default: the scenario's)")
     parser.add_argument('--out', type=Path, default=Path('runs/sim'), metavar='DIR',
@@ -76,7 +81,7 @@ def _controllers(args: argparse.Namespace) -> list[str | None]:
 def _run(args: argparse.Namespace) -> list[Path]:
     kinds = _controllers(args)
     configs = [resolve(args.scenario, kind, args.allocator, controller_file=args.controller_file,
-                       allocator_file=args.allocator_file) for kind in kinds]
+                       allocator_file=args.allocator_file, robot=args.robot) for kind in kinds]
     logs = [simulate(config, args.duration) for config in configs]
     written: list[Path] = []
     out: Path = args.out

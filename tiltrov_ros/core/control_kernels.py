@@ -38,7 +38,8 @@ CFG_RG = 26           # 3 entries: nominal r_g [m]
 CFG_RB = 29           # 3 entries: r_b [m]
 CFG_POSITION_SCALE = 32  # switching: group errors
 CFG_ANGLE_SCALE = 33
-CFG_SIZE = 34
+CFG_TOLERANCE = 34    # 6 entries: pid anti-windup, the shortfall that counts (X..N)
+CFG_SIZE = 40
 
 # work: float64[WORK_SIZE], the tracking error (TrackingError's fields).
 WORK_ETA = 0          # 6 entries
@@ -46,7 +47,8 @@ WORK_E = 6            # 6 entries
 WORK_E_DOT = 12       # 6 entries
 WORK_J = 18           # 36 entries, J(eta) row-major
 WORK_TAU = 54         # 6 entries: scratch
-WORK_SIZE = 60
+WORK_SHORT = 60       # 6 entries: pid, the previous wrench's shortfall in the earth frame
+WORK_SIZE = 66
 
 # out: float64[OUT_SIZE]
 OUT_TAU = 0           # 6 entries: the wrench (pd, pid; switching before its mask)
@@ -163,20 +165,46 @@ def tracking(position: FloatArray, quaternion: FloatArray, nu: FloatArray,
     return 0
 
 
+@kernel()
+def earth_shortfall(eta: FloatArray, short: FloatArray,
+                    earth: FloatArray) -> None:  # pragma: no cover - compiled
+    """earth = J(eta)^-T short (controllers.earth_shortfall): R (A.1) on the forces,
+    T(eta)^-T on the moments, with the gimbal guard of J."""
+    phi, theta, psi = eta[3], eta[4], eta[5]
+    if math.fabs(math.cos(theta)) < GIMBAL_GUARD_COS:
+        theta = math.copysign(math.acos(GIMBAL_GUARD_COS), theta)
+    cphi, sphi = math.cos(phi), math.sin(phi)
+    cth, sth = math.cos(theta), math.sin(theta)
+    cpsi, spsi = math.cos(psi), math.sin(psi)
+    x, y, z = short[0], short[1], short[2]
+    earth[0] = cpsi * cth * x + (-spsi * cphi + cpsi * sth * sphi) * y \
+        + (spsi * sphi + cpsi * cphi * sth) * z
+    earth[1] = spsi * cth * x + (cpsi * cphi + sphi * sth * spsi) * y \
+        + (-cpsi * sphi + sth * spsi * cphi) * z
+    earth[2] = -sth * x + cth * sphi * y + cth * cphi * z
+    k, m, n = short[3], short[4], short[5]
+    # T^-1 = [[1, 0, -s_th], [0, c_phi, c_th s_phi], [0, -s_phi, c_th c_phi]], transposed.
+    earth[3] = k
+    earth[4] = cphi * m - sphi * n
+    earth[5] = -sth * k + cth * sphi * m + cth * cphi * n
+
+
 @kernel('int64(int64, float64, boolean, float64[::1], float64[::1], float64[::1], '
         'float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], '
-        'float64[::1], float64[::1])', group='control')
+        'float64[::1], float64[::1], boolean, float64[::1], float64[::1])', group='control')
 def control_law(law: int, dt: float, integrate: bool, position: FloatArray,
                 quaternion: FloatArray, nu: FloatArray, ref_position: FloatArray,
                 ref_quaternion: FloatArray, ref_velocity: FloatArray, cfg: FloatArray,
-                integral: FloatArray, work: FloatArray,
-                out: FloatArray) -> int:  # pragma: no cover - compiled
+                integral: FloatArray, work: FloatArray, out: FloatArray, antiwindup: bool,
+                achieved: FloatArray, last: FloatArray) -> int:  # pragma: no cover - compiled
     """One update of the law ``law`` (LAW_*) into out; 0, or BAD_* with nothing changed.
 
     pd, eq. (16): tau = J^T (Kp e + Kd e_dot). pid: the integral (when
-    ``integrate``) becomes clip(integral + e dt, -max, max), then tau = g_hat(eta)
-    + J^T (Kp e + Kd e_dot + Ki integral). switching: the pd wrench and the two
-    groups' normalised errors.
+    ``integrate``) becomes clip(integral + e dt, -max, max), except in a DOF where
+    the previous wrench ``last`` fell short of it (``antiwindup``: last - achieved,
+    taken to the earth frame, beyond the tolerance in the direction e pushes), then
+    tau = g_hat(eta) + J^T (Kp e + Kd e_dot + Ki integral), copied into ``last``.
+    switching: the pd wrench and the two groups' normalised errors.
     """
     status = tracking(position, quaternion, nu, ref_position, ref_quaternion, ref_velocity,
                       work)
@@ -184,12 +212,23 @@ def control_law(law: int, dt: float, integrate: bool, position: FloatArray,
         return status
     e = work[WORK_E:WORK_E + 6]
     e_dot = work[WORK_E_DOT:WORK_E_DOT + 6]
+    short = work[WORK_SHORT:WORK_SHORT + 6]
+    if law == LAW_PID and integrate and antiwindup:
+        tau = work[WORK_TAU:WORK_TAU + 6]           # scratch: the body shortfall
+        for i in range(6):
+            tau[i] = last[i] - achieved[i]
+        earth_shortfall(work[WORK_ETA:WORK_ETA + 6], tau, short)
+    else:
+        for i in range(6):
+            short[i] = 0.0
     earth = out[OUT_TAU:OUT_TAU + 6]            # Kp e + ..., then overwritten by J^T of it
     for i in range(6):
         earth[i] = cfg[CFG_KP + i] * e[i] + cfg[CFG_KD + i] * e_dot[i]
     if law == LAW_PID:
         for i in range(6):
-            if integrate:
+            wound = (math.fabs(short[i]) > cfg[CFG_TOLERANCE + i]
+                     and short[i] * e[i] > 0.0)
+            if integrate and not wound:
                 lim = cfg[CFG_MAX_INTEGRAL + i]
                 v = integral[i] + e[i] * dt
                 integral[i] = -lim if v < -lim else lim if v > lim else v
@@ -220,6 +259,8 @@ def control_law(law: int, dt: float, integrate: bool, position: FloatArray,
         tau[5] -= (g0 * fg1 - g1 * fg0) + (b0 * fb1 - b1 * fb0)
     for i in range(6):
         out[OUT_TAU + i] = tau[i]
+        if law == LAW_PID:
+            last[i] = tau[i]
     if law == LAW_SWITCHING:
         ps, an = cfg[CFG_POSITION_SCALE], cfg[CFG_ANGLE_SCALE]
         out[OUT_GROUPS] = math.sqrt((e[0] / ps) ** 2 + (e[1] / ps) ** 2 + (e[5] / an) ** 2)
@@ -232,9 +273,11 @@ def control_law(law: int, dt: float, integrate: bool, position: FloatArray,
 
 def law_config(kp: Sequence[float], kd: Sequence[float], ki: Sequence[float] = (0.0,) * 6,
                max_integral: ArrayLike = (0.0,) * 6, *, robot: RobotParams | None = None,
-               scales: tuple[float, float] = (0.0, 0.0)) -> FloatArray:
-    """The cfg array of a law: gains, the PID's integral clamp and nominal robot (W, B,
-    r_g, r_b for g_hat), the switching baseline's (position, angle) error scales."""
+               scales: tuple[float, float] = (0.0, 0.0),
+               tolerance: ArrayLike = (0.0,) * 6) -> FloatArray:
+    """The cfg array of a law: gains, the PID's integral clamp, nominal robot (W, B,
+    r_g, r_b for g_hat) and anti-windup tolerance, the switching baseline's (position,
+    angle) error scales."""
     cfg = np.zeros(CFG_SIZE)
     cfg[CFG_KP:CFG_KP + 6] = kp
     cfg[CFG_KD:CFG_KD + 6] = kd
@@ -245,6 +288,7 @@ def law_config(kp: Sequence[float], kd: Sequence[float], ki: Sequence[float] = (
         cfg[CFG_RG:CFG_RG + 3] = robot.r_g
         cfg[CFG_RB:CFG_RB + 3] = robot.r_b
     cfg[CFG_POSITION_SCALE], cfg[CFG_ANGLE_SCALE] = scales
+    cfg[CFG_TOLERANCE:CFG_TOLERANCE + 6] = tolerance
     return cfg
 
 
@@ -275,20 +319,28 @@ class CompiledLaw:
         self.work = np.zeros(WORK_SIZE)
         self.out = np.zeros(OUT_SIZE)
         self._no_integral = np.zeros(6)
+        self._no_achieved = np.zeros(6)
+        self._no_last = np.zeros(6)
         jit.warmup(('control',))
 
     def __call__(self, position: ArrayLike, quaternion: ArrayLike, nu: ArrayLike,
                  reference: Any, *, dt: float = 0.0, integrate: bool = False,
-                 integral: FloatArray | None = None) -> FloatArray:
-        """``reference``: a controllers.Reference (position, quaternion, velocity)."""
+                 integral: FloatArray | None = None, achieved: ArrayLike | None = None,
+                 last: FloatArray | None = None) -> FloatArray:
+        """``reference``: a controllers.Reference (position, quaternion, velocity).
+        pid: ``last`` the controller's previous wrench (rewritten with this one) and
+        ``achieved`` what the allocator achieved of it (None: unknown, no anti-windup)."""
         q = _vector(quaternion, 4, 'quaternion')
         q_d = _vector(reference.quaternion, 4, 'reference quaternion')
+        got = (self._no_achieved if achieved is None
+               else _vector(achieved, 6, 'achieved wrench'))
         status = control_law(self.law, float(dt), integrate, _vector(position, 3, 'position'),
                              q, _vector(nu, 6, 'nu'),
                              _vector(reference.position, 3, 'reference position'), q_d,
                              _vector(reference.velocity, 6, 'reference velocity'),
                              self.cfg, self._no_integral if integral is None else integral,
-                             self.work, self.out)
+                             self.work, self.out, achieved is not None, got,
+                             self._no_last if last is None else last)
         if status:
             bad = q if status == BAD_QUATERNION else q_d
             raise ValueError(f'not a valid quaternion: {bad!r}')

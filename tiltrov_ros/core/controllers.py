@@ -21,7 +21,13 @@ the ROS node and the headless runner give the same numbers.
 * ``pid`` - PD plus the restoring forces g(eta) of the controller's nominal
   model and integral action with a clamp (anti-windup): the constant moment of
   the center-of-mass modeling error and the net buoyancy leave no steady-state
-  error.
+  error. With ``gains.antiwindup`` > 0 (off by default: measured in
+  docs/campaign.md, it lost runs as often as it saved them) and the wrench the
+  allocator achieved of its previous command (``update(..., achieved=...)``:
+  ``wrench_achieved``, one tick late), the integral of a DOF stops while that
+  command fell short by more than ``antiwindup`` wrench tolerances in the
+  direction the error pushes: it cannot wind up against a wrench the thrusters
+  do not produce.
 
 With the numba backend (:mod:`tiltrov_ros.core.jit`) each ``update`` makes one
 call of the compiled law (:mod:`tiltrov_ros.core.control_kernels`); the numpy
@@ -43,6 +49,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from tiltrov_ros.core import control_kernels as ck
 from tiltrov_ros.core import jit
+from tiltrov_ros.core.allocation import shortfall_tolerances
 from tiltrov_ros.core.dynamics import restoring_forces
 from tiltrov_ros.core.errors import ParameterError
 from tiltrov_ros.core.kinematics import (
@@ -109,7 +116,8 @@ class Controller(Protocol):
     def reset(self) -> None: ...
 
     def update(self, t: float, position: FloatArray, quaternion: FloatArray, nu: FloatArray,
-               reference: Reference) -> ControlOutput: ...
+               reference: Reference, achieved: FloatArray | None = None
+               ) -> ControlOutput: ...
 
 
 # --------------------------------------------------------------------------- configuration
@@ -126,8 +134,12 @@ GAINS = ParamTable('gains', [
     Param('integral_limit', 'floats', SHIPPED, 'pid only: bound on abs(ki integral(e)) per DOF, '
           'the anti-windup clamp (may be left out: zero)', _GAIN_UNITS + 'N, N m', size=6,
           low=0.0),
+    Param('antiwindup', 'float', 0.0, 'pid only: the integral of a DOF holds still while the '
+          'previous wrench fell short there (wrench_achieved) by more than this many wrench '
+          'tolerances (0.4 N, 0.08 N m for the paper\'s robot) in the direction the error '
+          'pushes; 0: off', '-', low=0.0, high=1e6),
 ], prefix='gains')
-_ZERO_GAINS = {'ki': (0.0,) * 6, 'integral_limit': (0.0,) * 6}
+_ZERO_GAINS = {'ki': (0.0,) * 6, 'integral_limit': (0.0,) * 6, 'antiwindup': 0.0}
 
 #: ``switching.*``: the rule of the switching baseline (see the module docstring).
 SWITCHING = ParamTable('switching', [
@@ -159,17 +171,20 @@ class Gains:
 
     kp : N/m, N m/rad; kd : N s/m, N m s/rad; ki : N/(m s), N m/(rad s);
     integral_limit : bound on |Ki * integral(e)| per DOF [N, N m] (anti-windup).
-    ``ki`` and ``integral_limit`` are used by ``pid`` only.
+    antiwindup : the shortfall, in wrench tolerances, that holds the integral (0: off).
+    ``ki``, ``integral_limit`` and ``antiwindup`` are used by ``pid`` only.
     """
 
     kp: tuple[float, ...]
     kd: tuple[float, ...]
-    ki: tuple[float, ...] = _ZERO_GAINS['ki']
-    integral_limit: tuple[float, ...] = _ZERO_GAINS['integral_limit']
+    ki: tuple[float, ...] = (0.0,) * 6
+    integral_limit: tuple[float, ...] = (0.0,) * 6
+    antiwindup: float = 0.0
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any], *, source: str | None = None) -> Gains:
-        """From the ``gains`` block (:data:`GAINS`); ``ki`` and ``integral_limit`` may be absent."""
+        """From the ``gains`` block (:data:`GAINS`); ``ki``, ``integral_limit`` and
+        ``antiwindup`` may be absent."""
         return cls(**GAINS.complete(values, source=source, defaults=_ZERO_GAINS))
 
 
@@ -281,6 +296,13 @@ def tracking_error(position: ArrayLike, quaternion: ArrayLike, nu: ArrayLike,
     return TrackingError(eta, e, e_dot, Jm)
 
 
+def earth_shortfall(err: TrackingError, short: ArrayLike) -> FloatArray:
+    """A body-wrench shortfall (X Y Z K M N) in the earth-frame coordinates of the PID's
+    terms: J(eta)^-T short, since tau = J^T (Kp e + ...)."""
+    out: FloatArray = np.linalg.solve(err.J.T, np.asarray(short, dtype=float))
+    return out
+
+
 class PDController:
     """Eq. (16): tau = J(eta)^T (Kp e + Kd e_dot)."""
 
@@ -296,7 +318,8 @@ class PDController:
         """PD has no state."""
 
     def update(self, t: float, position: FloatArray, quaternion: FloatArray, nu: FloatArray,
-               reference: Reference) -> ControlOutput:
+               reference: Reference, achieved: FloatArray | None = None) -> ControlOutput:
+        """``achieved`` is ignored (pd has no integral to hold)."""
         if self.compiled and self._law is not None:
             out = self._law(position, quaternion, nu, reference)
             return ControlOutput(out[ck.OUT_TAU:ck.OUT_TAU + 6].copy(), None, 'pd')
@@ -311,7 +334,12 @@ class PIDController:
     does not know the center-of-mass error); the integral removes what remains.
     The integral of each DOF is clamped so that |Ki integral(e)| stays within
     ``integral_limit`` (clamping anti-windup); it integrates with the time
-    between updates (the control period), never more than 1 s at a time.
+    between updates (the control period), never more than 1 s at a time. With
+    ``gains.antiwindup`` > 0 it holds still in a DOF where the previous command
+    fell short (``achieved``: :func:`earth_shortfall` of last - achieved beyond
+    ``antiwindup`` times the wrench tolerance,
+    :func:`~tiltrov_ros.core.allocation.shortfall_tolerances`, with the sign of
+    the error there).
     """
 
     def __init__(self, gains: Gains, robot: RobotParams) -> None:
@@ -323,11 +351,18 @@ class PIDController:
         limit = np.array(gains.integral_limit)
         with np.errstate(divide='ignore', invalid='ignore'):
             self._max_integral = np.where(self._ki > 0, limit / self._ki, 0.0)
+        self._tolerance = gains.antiwindup * shortfall_tolerances(robot)
         self.compiled = jit.compiled()
         self._law = (ck.CompiledLaw(ck.LAW_PID, ck.law_config(
-            gains.kp, gains.kd, gains.ki, self._max_integral, robot=robot))
-            if self.compiled else None)
+            gains.kp, gains.kd, gains.ki, self._max_integral, robot=robot,
+            tolerance=self._tolerance)) if self.compiled else None)
+        self._last = np.zeros(6)
         self.reset()
+
+    @property
+    def uses_achieved(self) -> bool:
+        """The anti-windup reads the achieved wrench (``gains.antiwindup`` > 0)."""
+        return self.gains.antiwindup > 0.0
 
     @property
     def integral(self) -> FloatArray:
@@ -340,26 +375,36 @@ class PIDController:
 
     def reset(self) -> None:
         self.integral = np.zeros(6)
-        self._last_t: float | None = None
+        self._last_t: float | None = None     # also: no previous command in self._last
 
     def update(self, t: float, position: FloatArray, quaternion: FloatArray, nu: FloatArray,
-               reference: Reference) -> ControlOutput:
+               reference: Reference, achieved: FloatArray | None = None) -> ControlOutput:
+        """``achieved``: what the allocator achieved of this controller's previous wrench
+        (None: unknown; the integral then integrates as without it)."""
+        previous = self._last_t
+        got = achieved if previous is not None and self.uses_achieved else None
         if self.compiled and self._law is not None:
-            last = self._last_t
-            dt = 0.0 if last is None else min(max(t - last, 0.0), 1.0)
+            dt = 0.0 if previous is None else min(max(t - previous, 0.0), 1.0)
             out = self._law(position, quaternion, nu, reference, dt=dt,
-                            integrate=last is not None, integral=self._integral)
+                            integrate=previous is not None, integral=self._integral,
+                            achieved=got, last=self._last)
             self._last_t = t
             return ControlOutput(out[ck.OUT_TAU:ck.OUT_TAU + 6].copy(), None, 'pid')
         err = tracking_error(position, quaternion, nu, reference)
-        if self._last_t is not None:
-            dt = min(max(t - self._last_t, 0.0), 1.0)
-            self.integral = np.clip(self.integral + err.e * dt, -self._max_integral,
-                                    self._max_integral)
+        if previous is not None:
+            dt = min(max(t - previous, 0.0), 1.0)
+            moved = np.clip(self.integral + err.e * dt, -self._max_integral,
+                            self._max_integral)
+            if got is not None:
+                short = earth_shortfall(err, self._last - np.asarray(got, dtype=float))
+                wound = (np.abs(short) > self._tolerance) & (short * err.e > 0.0)
+                moved = np.where(wound, self.integral, moved)
+            self.integral = moved
         self._last_t = t
         g_hat = restoring_forces(self.robot, Rquat(quat_normalize(quaternion)))
         earth = self._kp * err.e + self._kd * err.e_dot + self._ki * self.integral
-        return ControlOutput(g_hat + err.J.T @ earth, None, 'pid')
+        self._last = g_hat + err.J.T @ earth
+        return ControlOutput(self._last.copy(), None, 'pid')
 
 
 class SwitchingController:
@@ -405,7 +450,8 @@ class SwitchingController:
         self.switches += 1
 
     def update(self, t: float, position: FloatArray, quaternion: FloatArray, nu: FloatArray,
-               reference: Reference) -> ControlOutput:
+               reference: Reference, achieved: FloatArray | None = None) -> ControlOutput:
+        """``achieved`` is ignored (the baseline has no integral)."""
         tau: FloatArray | None = None
         if self.compiled and self._law is not None:
             out = self._law(position, quaternion, nu, reference)
@@ -443,6 +489,7 @@ def retune(controller: Controller, config: ControllerConfig, robot: RobotParams)
     if isinstance(controller, PIDController) and isinstance(new, PIDController):
         new.integral = np.clip(controller.integral, -new._max_integral, new._max_integral)
         new._last_t = controller._last_t
+        new._last = controller._last.copy()
     elif isinstance(controller, SwitchingController) and isinstance(new, SwitchingController):
         new.mode = controller.mode
         new.tilts = controller.tilts

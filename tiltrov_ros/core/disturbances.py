@@ -116,7 +116,16 @@ class Disturbances:
         return {'com_error': list(self.com_error), 'current': list(self.current),
                 'current_std': list(self.current_std),
                 'current_time_constant': list(self.current_time_constant),
-                'seed': int(self.seed), 'external_wrench': wrench}
+                'seed': int(self.seed), 'external_wrench': wrench,
+                'external_wrench_lasting': self.lasting_wrench()}
+
+    def lasting_wrench(self) -> list[float] | None:
+        """The external wrench that lasts for ever (a constant, or the endless pulses of
+        a callable that tells them: ``lasting()``); None when unknown."""
+        if not callable(self.external_wrench):
+            return list(self.external_wrench)
+        lasting = getattr(self.external_wrench, 'lasting', None)
+        return [float(v) for v in lasting()] if callable(lasting) else None
 
 
 class OceanCurrent:

@@ -57,6 +57,17 @@ Further keys
     controller, allocator_mode and backend, from the meta) describe what was
     measured.
 
+The steady wrench (:mod:`tiltrov_ros.core.steady`)
+    At the final setpoint (the last tick's, when its velocity is zero) and the
+    run's mean current, true center of mass and lasting external wrench (the
+    meta's ``robot``, ``disturbances`` and ``allocator_weights``):
+    ``steady_wrench[X..N]`` the wrench that holds it (N, N m),
+    ``steady_shortfall[X..N]`` what the best configuration within the servo
+    range misses of it, ``steady_shortfall_ratio`` the largest shortfall in
+    units of the wrench tolerance (at most 1: attainable) and
+    ``steady_shortfall_ratio_full_circle`` the same with servos turning all
+    the way round. ``None`` without those metas or a moving final setpoint.
+
 A quantity that cannot be computed (no ticks, no max_thrust in the meta) is
 ``None`` (``null`` in JSON), never NaN.
 """
@@ -74,8 +85,9 @@ from numpy.typing import NDArray
 
 from tiltrov_ros.core.allocation import infeasible_rows
 from tiltrov_ros.core.kinematics import euler_from_quat_rows, ssa
-from tiltrov_ros.core.names import DOF_NAMES, SERVOS, THRUSTERS
+from tiltrov_ros.core.names import DOF_NAMES, SERVOS, THRUSTERS, WRENCH_DOFS
 from tiltrov_ros.core.runlog import RunLog
+from tiltrov_ros.core.steady import SteadyVerdict, from_meta
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -195,6 +207,13 @@ def settling_times(err: ControlErrors) -> tuple[list[float | None], FloatArray]:
     return out, band
 
 
+def _steady(log: RunLog) -> SteadyVerdict | None:
+    """The oracle at the last tick's setpoint, when it stands still (module docstring)."""
+    if not len(log.tc) or np.any(log.setpoint_velocity[-1] != 0.0):
+        return None
+    return from_meta(log.meta, log.setpoint_quaternion[-1])
+
+
 def compute_metrics(log: RunLog, *, max_thrust: float | None = None) -> dict[str, Any]:
     """Every metric of the module docstring, as a JSON-ready dict.
 
@@ -273,6 +292,14 @@ def compute_metrics(log: RunLog, *, max_thrust: float | None = None) -> dict[str
     metrics['saturation_duty'] = _per(THRUSTERS, duty)
     metrics['thrust_energy_proxy'] = energy
     metrics['infeasible_fraction'] = infeasible
+    verdict = _steady(log)
+    metrics['steady_wrench'] = _per(WRENCH_DOFS, None if verdict is None else verdict.wrench)
+    metrics['steady_shortfall'] = _per(
+        WRENCH_DOFS, None if verdict is None else verdict.in_range.shortfall)
+    metrics['steady_shortfall_ratio'] = None if verdict is None else _num(
+        verdict.in_range.ratio)
+    metrics['steady_shortfall_ratio_full_circle'] = None if verdict is None else _num(
+        verdict.full_circle.ratio)
     metrics['ticks'] = n
     metrics['unmatched_ticks'] = ticks - n
     metrics['duration'] = end

@@ -182,6 +182,27 @@ class RobotParams:
         return cls(**checked, source=source)
 
 
+def robot_file(name: str | Path) -> Path:
+    """A robot parameter file by path, or by the name of a shipped one
+    (``robot_past_vertical`` for ``config/robot_past_vertical.yaml``).
+
+    Raises
+    ------
+    ParameterError
+        If it names neither an existing file nor a shipped one.
+    """
+    path = Path(name)
+    if path.is_file():
+        return path
+    if not path.suffix and len(path.parts) == 1:
+        try:
+            return config_file(f'{name}.yaml')
+        except FileNotFoundError:
+            pass
+    raise ParameterError('robot', f'got {str(name)!r}; allowed: a robot parameter file, or '
+                         'the name of a shipped one (robot, robot_past_vertical)')
+
+
 def load_robot_params(path: str | Path | None = None) -> RobotParams:
     """Load :class:`RobotParams` from a ROS 2 parameter file (default: the shipped one).
 

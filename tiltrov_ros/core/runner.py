@@ -10,7 +10,8 @@ and stamps" and "Controller interface"), without messages:
   t_i)::
 
       reference = reference_fn(t_i)     # (position (3), quaternion (4), velocity (6))
-      out = controller.update(t_i, position, quaternion, nu, reference)
+      out = controller.update(t_i, position, quaternion, nu, reference,
+                              achieved=prev_res.achieved)   # None at the first tick
       if out.tilt_request is None:
           res = allocator.allocate(out.wrench, previous=prev_res)
       else:
@@ -18,7 +19,8 @@ and stamps" and "Controller interface"), without messages:
       plant.command(res.thrusts, (res.tilt_front, res.tilt_rear))   # held until the next tick
 
   then the plant steps. t_i is passed as float seconds, ``seconds(t_ns)``, as
-  the nodes do;
+  the nodes do; ``achieved`` is the wrench the allocator achieved at the previous
+  tick (the node's ``wrench_achieved`` stamped t_i - T);
 * the :class:`~tiltrov_ros.core.runlog.RunLog` gets one plant row per step
   including t = 0 (N + 1 rows for N steps) and one control row per tick, ticks
   at t_i < duration (the commands of a row are in force over [t_i, t_i + T)).
@@ -83,8 +85,9 @@ class ControlOutputLike(Protocol):
 
 class ControllerLike(Protocol):
     def update(self, t: float, position: FloatArray, quaternion: FloatArray, nu: FloatArray,
-               reference: Any, /) -> ControlOutputLike:
-        """The wrench for the state at time t (s) and the reference at t."""
+               reference: Any, /, achieved: FloatArray | None = None) -> ControlOutputLike:
+        """The wrench for the state at time t (s) and the reference at t; ``achieved``:
+        what the allocator achieved of the previous wrench (None: unknown)."""
 
 
 class AllocationResultLike(Protocol):
@@ -209,7 +212,9 @@ def run(plant: Plant, controller: ControllerLike, allocator: AllocatorLike,
             reference = Reference(_vector(p, 3, 'reference position'),
                                   _vector(q, 4, 'reference quaternion'),
                                   _vector(v, 6, 'reference velocity'))
-            out = controller.update(t, plant.position, plant.quaternion, plant.nu, reference)
+            out = controller.update(t, plant.position, plant.quaternion, plant.nu, reference,
+                                    achieved=None if previous is None
+                                    else np.asarray(previous.achieved, dtype=float))
             wrench = _vector(out.wrench, 6, 'controller wrench')
             request = out.tilt_request
             if request is None:
@@ -337,6 +342,10 @@ class StackConfig:
             'tilt_max': self.robot.tilt_max,
             'tilt_rate_limit': self.robot.tilt_rate_limit,
             'backend': jit.backend(),
+            # What the steady-wrench oracle of the metrics needs (core/steady.py).
+            'robot': self.robot.as_dict(),
+            'disturbances': self.scenario.disturbances.describe(),
+            'allocator_weights': list(self.allocator.weights),
         }
 
 

@@ -150,6 +150,14 @@ class WrenchPulses:
                 total += np.array(wrench)
         return total
 
+    def lasting(self) -> FloatArray:
+        """The sum of the pulses that never end: the wrench that stays."""
+        total = np.zeros(6)
+        for _, end, wrench in self.pulses:
+            if math.isinf(end):
+                total += np.array(wrench)
+        return total
+
 
 @dataclass(frozen=True)
 class InitialState:

@@ -9,6 +9,9 @@ The switching baseline fixes the tilts itself through ``tilt_request``
 (parameter ``tilt_request``: ``auto``, ``required``, ``ignored``; how requests
 pair with wrenches: nodes/tilt_request.py).
 
+``/diagnostics`` says "cannot hold this setpoint with these servos" (WARN) when the
+core's :class:`~tiltrov_ros.core.steady.HoldMonitor` finds so (all four thrusters).
+
 The launcher sets ``required`` for the switching controller and ``ignored``
 otherwise. A repeated wrench stamp re-publishes the cached answer without
 allocating again (so re-publication is idempotent and ``previous`` does not
@@ -57,6 +60,7 @@ from tiltrov_ros.core.names import (
 )
 from tiltrov_ros.core.paramtable import Param, ParamTable
 from tiltrov_ros.core.scenarios import ThrusterFault, failed_at, load_scenario
+from tiltrov_ros.core.steady import HoldMonitor
 from tiltrov_ros.core.timebase import format_ns, seconds, to_ns
 from tiltrov_ros.core.validation import (
     MAX_WRENCH,
@@ -134,6 +138,7 @@ class ThrustAllocatorNode(TiltRequests, TiltrovNode):
         self._declare_parameters()
         self.failed: tuple[int, ...] = ()       # failed thrusters the allocator knows
         self.allocator = self.allocator_config.build(self.robot, self.control_period)
+        self._new_hold_monitor()
         self._use_failed(self._wanted_failed(None), 'at start-up')
 
         # Guarded: a non-finite message is replaced by the same part of the safe answer.
@@ -214,7 +219,8 @@ class ThrustAllocatorNode(TiltRequests, TiltrovNode):
         self.tilt_request_mode = own['tilt_request']
         self.input_timeout = own['input_timeout']
         self.wrench_timeout = own['wrench_timeout']
-        self.tolerances = shortfall_tolerances(self.robot, own['wrench_tolerance'])
+        self.wrench_tolerance = own['wrench_tolerance']
+        self.tolerances = shortfall_tolerances(self.robot, self.wrench_tolerance)
         self.measured_tilts = own['tilt_source'] == 'measured'
         self.allocator_config = AllocatorConfig.from_mapping(
             {key: self.get_parameter(key).value for key in ALLOCATION.names})
@@ -239,7 +245,9 @@ class ThrustAllocatorNode(TiltRequests, TiltrovNode):
             if p.name == 'wrench_timeout':
                 self.wrench_timeout = float(p.value)
             elif p.name == 'wrench_tolerance':
-                self.tolerances = shortfall_tolerances(self.robot, float(p.value))
+                self.wrench_tolerance = float(p.value)
+                self.tolerances = shortfall_tolerances(self.robot, self.wrench_tolerance)
+                self._new_hold_monitor()
             elif p.name == 'input_timeout':
                 self.input_timeout = float(p.value)
             elif p.name == 'failed_thrusters':
@@ -252,7 +260,12 @@ class ThrustAllocatorNode(TiltRequests, TiltrovNode):
             {key: self.get_parameter(key).value for key in ALLOCATION.names})
         self.allocator = self.allocator_config.build(self.robot, self.control_period,
                                                      self.failed)
+        self._new_hold_monitor()
         self.get_logger().info(f'allocator changed: {self.allocator_config}')
+
+    def _new_hold_monitor(self) -> None:
+        self.hold_monitor = HoldMonitor(self.robot, self.control_period,
+                                        self.allocator_config.weights, self.wrench_tolerance)
 
     # -- failed thrusters ------------------------------------------------------------
 
@@ -269,6 +282,7 @@ class ThrustAllocatorNode(TiltRequests, TiltrovNode):
             return
         self.failed = failed
         self.allocator = self.allocator_config.build(self.robot, self.control_period, failed)
+        self.hold_monitor.reset()
         working = [i for i in range(4) if i not in failed]
         self.get_logger().warning(
             f'{why}: failed thruster(s): {thruster_names(failed)}; allocating with '
@@ -344,6 +358,8 @@ class ThrustAllocatorNode(TiltRequests, TiltrovNode):
             result = self.allocator.allocate_fixed(wrench, request[0], request[1],
                                                    previous=start)
         self.previous = result
+        if request is None and not self.failed:     # the monitor knows four thrusters
+            self.hold_monitor.update(wrench, result.achieved)
         self.ticks += 1
         self.methods[result.method] += 1
         if result.feasible:
@@ -415,6 +431,7 @@ class ThrustAllocatorNode(TiltRequests, TiltrovNode):
         self.resets += 1
         self.get_logger().info(f'{why}: forgetting the previous allocation')
         self.previous = None
+        self.hold_monitor.reset()
         self._requests.clear()
         self._measured.clear()
         self._waiting = None
@@ -502,8 +519,12 @@ class ThrustAllocatorNode(TiltRequests, TiltrovNode):
         request_level, request_text, request_values = self._tilt_request_status()
         level = max(level, request_level)
         message += request_text
+        hold, steady = self.hold_monitor.report()
+        if hold:
+            level, message = WARN, f'{hold}; {message}'
+
         last = self.previous
-        return level, message, {**request_values,
+        return level, message, {**request_values, **steady,
             'mode': self.allocator_config.mode, 'ticks': self.ticks,
             'feasible': self.feasible, 'infeasible': self.infeasible, 'short': self.short,
             'tolerances': [float(v) for v in self.tolerances],

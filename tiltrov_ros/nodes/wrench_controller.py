@@ -75,6 +75,7 @@ from tiltrov_ros.core.validation import (
     check_quaternion,
 )
 
+from .achieved_input import AchievedInput
 from .base import OK, WARN, TiltrovNode
 from .conversions import (
     FloatArray,
@@ -132,12 +133,13 @@ def _config_mapping(get: Any) -> dict[str, Any]:
     """The ``wrench_controller`` parameters as ControllerConfig.from_mapping wants them."""
     return {
         'controller': get('controller'),
-        'gains': {key: list(get(GAINS.full_name(key))) for key in GAINS.names},
+        'gains': {key: value if isinstance(value, float) else list(value)  # arrays: lists
+                  for key in GAINS.names for value in [get(GAINS.full_name(key))]},
         'switching': {key: get(SWITCHING.full_name(key)) for key in SWITCHING.names},
     }
 
 
-class WrenchController(TiltrovNode):
+class WrenchController(AchievedInput, TiltrovNode):
     """The wrench controller (see the module docstring)."""
 
     kernel_groups = ('control',)
@@ -174,6 +176,7 @@ class WrenchController(TiltrovNode):
             self.create_input_subscription(TwistStamped, SETPOINT_VELOCITY, self._on_velocity,
                                            RELIABLE_QOS)
 
+        self.init_achieved_input()
         self._setpoints: dict[int, tuple[FloatArray, FloatArray]] = {}
         self._velocities: dict[int, FloatArray] = {}
         self._latest_setpoint: tuple[int, FloatArray, FloatArray] | None = None
@@ -340,6 +343,8 @@ class WrenchController(TiltrovNode):
                 if not velocity_timed_out:
                     return
                 velocity = np.zeros(6)
+            if self.waits_for_achieved(ns, velocity_timed_out):
+                return
         else:
             if self._latest_setpoint is None:
                 self._tick = None
@@ -357,7 +362,7 @@ class WrenchController(TiltrovNode):
         self._tick = None
         reference = Reference(setpoint[0], setpoint[1], velocity)
         out = self.controller.update(seconds(ns), tick.position, tick.quaternion, tick.nu,
-                                     reference)
+                                     reference, achieved=self.achieved_of_last())
         self._answer(ns, out)
         for buffer in (self._setpoints, self._velocities):
             for stamp in [s for s in buffer if s < ns]:
@@ -435,11 +440,12 @@ class WrenchController(TiltrovNode):
         waited = seconds(self.steady_ns() - tick.since)
         if waited < self.input_timeout:
             return
-        if tick.ns in self._setpoints:
-            self.velocity_timeouts += 1
-            self.get_logger().warning(f'no setpoint_velocity stamped {format_ns(tick.ns)} '
-                                      f'after {waited:.2f} s: using zero feed-forward',
-                                      throttle_duration_sec=THROTTLE)
+        if tick.ns in self._setpoints:     # the velocity or the pid's achieved wrench is late
+            if self.use_velocity and tick.ns not in self._velocities:
+                self.velocity_timeouts += 1
+                self.get_logger().warning(f'no setpoint_velocity stamped {format_ns(tick.ns)} '
+                                          f'after {waited:.2f} s: using zero feed-forward',
+                                          throttle_duration_sec=THROTTLE)
             self._try_compute(velocity_timed_out=True)
         elif self._warned_tick != tick.ns:
             self._warned_tick = tick.ns
@@ -476,6 +482,7 @@ class WrenchController(TiltrovNode):
             'republished': self.republished, 'setpoint_waits': self.setpoint_waits,
             'velocity_timeouts': self.velocity_timeouts,
             'ticks_without_setpoint': self.no_setpoint, 'safe_answers': self.safe_answers,
+            'achieved_timeouts': self.achieved_timeouts,
             'resets': self.resets, 'odom_stale': self.odom_watchdog.stale,
             'odom_stale_events': self.odom_watchdog.events,
             'watchdog_zero_wrenches': self.watchdog_outputs,

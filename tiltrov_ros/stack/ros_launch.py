@@ -6,7 +6,7 @@ The nodes, their parameter files and overrides are :func:`.specs.stack_specs`'
 numbers of ``tiltrov launch`` and ``tiltrov sim``. Arguments::
 
     scenario:=pitch_hold  controller:=pd|switching|pid  allocator:=robust|paper
-    mode:=lockstep|realtime  real_time_factor:=1.0  duration:=SEC
+    robot:=robot_past_vertical|FILE  mode:=lockstep|realtime  real_time_factor:=1.0  duration:=SEC
     namespace:=NS  record:=DIR  markers:=true|false
 
 Where robot_state_publisher is installed (a ROS install) it is started too,
@@ -71,6 +71,8 @@ ARGUMENTS = {
     'scenario': ('pitch_hold', 'scenario name (config/scenarios) or path of a scenario file'),
     'controller': ('', "pd, switching or pid; empty: config/wrench_controller.yaml's"),
     'allocator': ('', "robust or paper; empty: config/thrust_allocator.yaml's"),
+    'robot': ('', 'robot parameter file, or the name of a shipped one (robot_past_vertical: '
+                  "servos past vertical); empty: config/robot.yaml, the paper's +-90 deg"),
     'mode': (LOCKSTEP, 'lockstep (deterministic, as fast as possible) or realtime'),
     'real_time_factor': ('1.0', 'realtime mode: sim seconds per wall second'),
     'duration': ('', "sim seconds to run; empty: the scenario's"),
@@ -103,7 +105,8 @@ def options_from(values: dict[str, str]) -> LaunchOptions:
         raise LaunchError(f'markers:={values["markers"]!r}: allowed: true or false')
     return LaunchOptions(
         scenario=values['scenario'], controller=values['controller'] or None,
-        allocator=values['allocator'] or None, duration=duration, lockstep=mode == LOCKSTEP,
+        allocator=values['allocator'] or None, duration=duration,
+        robot=values['robot'] or None, lockstep=mode == LOCKSTEP,
         real_time_factor=factor, record=Path(values['record']) if values['record'] else None,
         namespace=values['namespace'], launcher='ros2 launch',
         markers=values['markers'] == 'true')

@@ -31,6 +31,7 @@ from tiltrov_ros.core.names import (
     join_namespace,
     normalize_namespace,
 )
+from tiltrov_ros.core.params import robot_file
 from tiltrov_ros.core.runner import StackConfig, stack_config
 from tiltrov_ros.core.timebase import seconds, to_ns
 from tiltrov_ros.paths import config_file
@@ -54,6 +55,7 @@ class LaunchOptions:
     controller: str | None = None          # None: config/wrench_controller.yaml's
     allocator: str | None = None           # None: config/thrust_allocator.yaml's
     duration: float | None = None          # None: the scenario's
+    robot: str | None = None               # robot file or shipped name; None: robot.yaml
     lockstep: bool = True
     real_time_factor: float = 1.0
     record: Path | None = None
@@ -127,12 +129,20 @@ def remap_args(namespace: str) -> list[str]:
     return [arg for old, new in TF_REMAPPINGS for arg in ('-r', f'{old}:={new}')]
 
 
+def robot_path(options: LaunchOptions) -> Path:
+    """The robot parameter file of a launch (``--robot``; default the shipped one)."""
+    if options.robot is None:
+        return config_file('robot.yaml')
+    return robot_file(options.robot).resolve()
+
+
 def resolve(options: LaunchOptions) -> tuple[StackConfig, float]:
     """The stack configuration and the duration (s), validated before anything starts."""
     scenario = options.scenario
     if Path(scenario).suffix:
         scenario = str(Path(scenario).resolve())
-    config = stack_config(scenario, options.controller, allocator_mode=options.allocator)
+    config = stack_config(scenario, options.controller, allocator_mode=options.allocator,
+                          robot_file=robot_path(options))
     duration = config.scenario.duration if options.duration is None else options.duration
     step = config.step_ns
     if to_ns(duration) <= 0 or to_ns(duration) % step:
@@ -155,10 +165,12 @@ def stack_specs(options: LaunchOptions, *, config_dir: Path | None = None,
     scenario_param = (str(Path(options.scenario).resolve()) if Path(options.scenario).suffix
                       else options.scenario)
 
+    robot_yaml = robot_path(options)
+
     def files(node: str) -> tuple[Path, ...]:
         if config_dir is not None:
-            return (config_dir / 'robot.yaml', config_dir / f'{node}.yaml')
-        return (config_file('robot.yaml'), config_file(f'{node}.yaml'))
+            return (config_dir / robot_yaml.name, config_dir / f'{node}.yaml')
+        return (robot_yaml, config_file(f'{node}.yaml'))
 
     robot = {f'robot.{key}': (list(value) if isinstance(value, (list, tuple)) else value)
              for key, value in config.scenario.robot_overrides}

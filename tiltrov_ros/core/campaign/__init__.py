@@ -23,7 +23,8 @@ are in ``angle_unit``.
   and the key (:class:`~tiltrov_ros.core.errors.CampaignError`);
 * :func:`draw_sample` (:mod:`.sampling`) draws sample ``i`` as a scenario
   document, the same whichever samples are drawn around it;
-* :meth:`CampaignSpec.violations` judges a run's metrics against ``hold``.
+* :meth:`CampaignSpec.violations` judges a run's metrics against ``hold``;
+  :func:`verdict` says why a run that does not hold fails.
 
 Running the samples (Dask), the table and the summary are
 :mod:`tiltrov_ros.campaign`.
@@ -32,12 +33,16 @@ Running the samples (Dask), the table and the summary are
 from tiltrov_ros.core.campaign.parse import load_campaign, parse_campaign
 from tiltrov_ros.core.campaign.sampling import Sample, draw_sample, draw_samples
 from tiltrov_ros.core.campaign.spec import (
+    VERDICTS,
     Bound,
     CampaignSpec,
     Configuration,
     Distribution,
     metrics_template,
+    verdict,
+    violations,
 )
 
-__all__ = ['Bound', 'CampaignSpec', 'Configuration', 'Distribution', 'Sample', 'draw_sample',
-           'draw_samples', 'load_campaign', 'metrics_template', 'parse_campaign']
+__all__ = ['VERDICTS', 'Bound', 'CampaignSpec', 'Configuration', 'Distribution', 'Sample',
+           'draw_sample', 'draw_samples', 'load_campaign', 'metrics_template',
+           'parse_campaign', 'verdict', 'violations']

@@ -7,6 +7,7 @@ got 'pdd'; allowed: pd, switching, pid``), as scenario files do.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+import itertools
 import math
 from pathlib import Path
 import re
@@ -25,6 +26,7 @@ from tiltrov_ros.core.campaign.spec import (
     Distribution,
     FaultDraw,
     PulseDraw,
+    RobotValue,
     TermTemplate,
     VectorDraw,
     metrics_template,
@@ -34,6 +36,9 @@ from tiltrov_ros.core.errors import CampaignError, ParameterError, TiltrovError
 from tiltrov_ros.core.names import DOF_NAMES
 from tiltrov_ros.core.params import RobotParams
 from tiltrov_ros.core.scenarios import load_scenario_document
+
+#: A robot factor's level: its name and the robot keys it sets (SI units, rad).
+Level = tuple[str, tuple[tuple[str, RobotValue], ...]]
 
 _TOP_KEYS = {'name', 'description', 'seed', 'samples', 'duration', 'angle_unit', 'base',
              'reference', 'disturbances', 'robot', 'faults', 'compare', 'hold'}
@@ -178,9 +183,10 @@ class _Parser:
                             {'current', 'current_std', 'current_time_constant', 'com_error',
                              'external_wrench'})
         compare = self.mapping(doc.get('compare'), 'compare',
-                               {'controllers', 'allocators', 'gains'})
+                               {'controllers', 'allocators', 'gains', 'robot'})
         gain_sets = self.gain_sets(compare.get('gains'))
-        configurations = self.configurations(compare, [g for g, _ in gain_sets])
+        factors = self.factors(compare.get('robot'))
+        configurations = self.configurations(compare, [g for g, _ in gain_sets], factors)
         hold = self.hold(doc.get('hold'), configurations)
         return CampaignSpec(
             name, str(doc.get('description', '')).strip(), seed, samples, duration,
@@ -193,7 +199,8 @@ class _Parser:
             self.vector(dist['com_error'], 'disturbances.com_error', magnitude=True)
             if 'com_error' in dist else None,
             self.pulses(dist.get('external_wrench')), self.robot(doc.get('robot')),
-            self.fault(doc.get('faults')), configurations, gain_sets, hold, self.source)
+            self.fault(doc.get('faults')), configurations, gain_sets, hold, self.source,
+            tuple((name, tuple(level for level, _ in levels)) for name, levels in factors))
 
     def bases(self, value: Any) -> tuple[tuple[str, Mapping[str, Any]], ...]:
         if value is None:
@@ -270,19 +277,53 @@ class _Parser:
                                        for k, w in enumerate(wrench))))
         return tuple(out)
 
-    def robot(self, value: Any
+    def robot(self, value: Any, where: str = 'robot'
               ) -> tuple[tuple[str, Distribution | tuple[Distribution, ...]], ...]:
         known = {f for f in RobotParams.__dataclass_fields__ if f != 'source'}
-        doc = self.mapping(value, 'robot', known)
+        doc = self.mapping(value, where, known)
         out: list[tuple[str, Distribution | tuple[Distribution, ...]]] = []
         for key in sorted(doc):
             item = doc[key]
             if isinstance(item, Sequence) and not isinstance(item, str):
-                out.append((str(key), tuple(self.dist(v, f'robot.{key}[{i}]')
+                out.append((str(key), tuple(self.dist(v, f'{where}.{key}[{i}]')
                                             for i, v in enumerate(item))))
             else:
                 scale = self.scale if key in ROBOT_ANGLE_KEYS else 1.0
-                out.append((str(key), self.dist(item, f'robot.{key}', scale)))
+                out.append((str(key), self.dist(item, f'{where}.{key}', scale)))
+        return tuple(out)
+
+    def factors(self, value: Any) -> tuple[tuple[str, tuple[Level, ...]], ...]:
+        """``compare.robot``: factors, each a mapping of level names to the robot keys
+        the level sets (numbers, in the file's units, as in ``robot``)."""
+        if value is None:
+            return ()
+        if not isinstance(value, Mapping) or not value:
+            raise self.fail('compare.robot', 'expected robot factors, e.g. {servo_range: '
+                                             '{r90: {tilt_min: -90, tilt_max: 90}, ...}}, '
+                                             f'got {value!r}')
+        out = []
+        for factor, levels in value.items():
+            where = f'compare.robot.{factor}'
+            self.names([factor], 'compare.robot')
+            if not isinstance(levels, Mapping) or not levels:
+                raise self.fail(where, f'expected named levels, got {levels!r}')
+            parsed = []
+            for level, keys in levels.items():
+                self.names([level], where)
+                drawn = self.robot(keys, f'{where}.{level}')
+                if not drawn:
+                    raise self.fail(f'{where}.{level}', 'expected robot keys and values')
+                values: list[tuple[str, RobotValue]] = []
+                for key, dist in drawn:
+                    constants = [d.args[0] if d.kind == 'constant' else None
+                                 for d in (dist if isinstance(dist, tuple) else (dist,))]
+                    if None in constants:
+                        raise self.fail(f'{where}.{level}.{key}', 'a factor level sets '
+                                        'numbers, not distributions')
+                    values.append((key, tuple(constants) if isinstance(dist, tuple)  # type: ignore[arg-type]
+                                   else float(constants[0])))  # type: ignore[arg-type]
+                parsed.append((str(level), tuple(values)))
+            out.append((str(factor), tuple(parsed)))
         return tuple(out)
 
     def fault(self, value: Any) -> FaultDraw | None:
@@ -309,7 +350,8 @@ class _Parser:
         for name, gains in value.items():
             where = f'compare.gains.{name}'
             self.names([name], 'compare.gains')
-            body = self.mapping(gains, where, {'kp', 'kd', 'ki', 'integral_limit'})
+            body = self.mapping(gains, where, {'kp', 'kd', 'ki', 'integral_limit',
+                                               'antiwindup'})
             if body:
                 try:   # the same checks as the controller's parameter file
                     Gains.from_mapping({'kp': [1.0] * 6, 'kd': [1.0] * 6, **body})
@@ -320,13 +362,21 @@ class _Parser:
             out.append((str(name), dict(body)))
         return tuple(out)
 
-    def configurations(self, compare: Mapping[str, Any], gains: list[str]
+    def configurations(self, compare: Mapping[str, Any], gains: list[str],
+                       factors: tuple[tuple[str, tuple[Level, ...]], ...] = ()
                        ) -> tuple[Configuration, ...]:
         controllers = self.names(compare.get('controllers', ['pd']), 'compare.controllers',
                                  CONTROLLER_KINDS)
         allocators = self.names(compare.get('allocators', ['robust']), 'compare.allocators')
-        return tuple(Configuration(c, a, g, '-'.join([c, a] + ([g] if len(gains) > 1 else [])))
-                     for c in controllers for a in allocators for g in gains)
+        out = []
+        for c, a, g in itertools.product(controllers, allocators, gains):
+            for levels in itertools.product(*(levels for _, levels in factors)):
+                names = [level for level, _ in levels]
+                robot = tuple(item for _, keys in levels for item in keys)
+                out.append(Configuration(
+                    c, a, g, '-'.join([c, a] + ([g] if len(gains) > 1 else []) + names),
+                    tuple(names), robot))
+        return tuple(out)
 
     def hold(self, value: Any, configurations: tuple[Configuration, ...]) -> tuple[Bound, ...]:
         template = metrics_template()

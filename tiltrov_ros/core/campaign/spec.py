@@ -97,14 +97,24 @@ class FaultDraw:
     detected_after: Distribution
 
 
+RobotValue = float | tuple[float, ...]
+
+
 @dataclass(frozen=True)
 class Configuration:
-    """One way of controlling the robot that every sample runs with."""
+    """One way of controlling (and building) the robot that every sample runs with.
+
+    ``levels``: the level of each robot factor (``compare.robot``), in the file's
+    order; ``robot``: the robot keys they set (SI units, rad), over the drawn ones.
+    """
 
     controller: str
     allocator: str
     gains: str
-    name: str           # e.g. 'pid-robust' (plus '-<gains>' with several gain sets)
+    name: str           # e.g. 'pid-robust' (plus '-<gains>' with several gain sets,
+    #                     '-<level>' per robot factor)
+    levels: tuple[str, ...] = ()
+    robot: tuple[tuple[str, RobotValue], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -161,6 +171,8 @@ class CampaignSpec:
     gain_sets: tuple[tuple[str, Mapping[str, Any]], ...]
     hold: tuple[Bound, ...]
     source: str | None = None
+    #: The robot factors (``compare.robot``): (factor, its level names), file order.
+    factors: tuple[tuple[str, tuple[str, ...]], ...] = ()
 
     @property
     def angle_unit(self) -> str:
@@ -173,10 +185,42 @@ class CampaignSpec:
         raise CampaignError(f'{self.source or "campaign"}: no configuration {name!r}; '
                             f'known: {", ".join(c.name for c in self.configurations)}')
 
+    def bounds(self, config: Configuration) -> tuple[Bound, ...]:
+        """The ``hold`` bounds that apply to the runs of ``config``."""
+        return tuple(bound for bound in self.hold if bound.applies(config))
+
     def violations(self, config: Configuration, metrics: Mapping[str, Any]) -> list[str]:
         """The ``hold`` bounds a run of ``config`` misses (empty: the run holds)."""
-        return [line for bound in self.hold if bound.applies(config)
-                for line in bound.violations(metrics)]
+        return violations(self.bounds(config), metrics)
+
+
+def violations(bounds: tuple[Bound, ...], metrics: Mapping[str, Any]) -> list[str]:
+    """The bounds ``metrics`` misses, one line each (empty: the run holds)."""
+    return [line for bound in bounds for line in bound.violations(metrics)]
+
+
+#: A run's verdict (docs/campaign.md, "Verdicts"): it holds; it does not, and...
+HELD = 'held'
+SERVO_RANGE = 'servo_range'     # ...the same run with servos turning all the way round holds
+PHYSICS = 'physics'             # ...no tilt on the full circle produces its steady wrench
+CONTROL = 'control'             # ...neither: the controller's or the allocator's doing
+VERDICTS = (HELD, SERVO_RANGE, PHYSICS, CONTROL)
+
+
+def verdict(holds: bool, metrics: Mapping[str, Any] | None,
+            counterfactual_holds: bool | None) -> str:
+    """The verdict of a run: ``held``; else ``servo_range`` when its counterfactual (the
+    same run, servos at +-180 deg; None: not run) holds; else ``physics`` when the
+    steady-wrench oracle finds no tilt on the full circle that produces the steady
+    wrench (``steady_shortfall_ratio_full_circle`` > 1); else ``control``."""
+    if holds:
+        return HELD
+    if counterfactual_holds:
+        return SERVO_RANGE
+    ratio = (metrics or {}).get('steady_shortfall_ratio_full_circle')
+    if isinstance(ratio, (int, float)) and ratio > 1.0:
+        return PHYSICS
+    return CONTROL
 
 
 @cache
