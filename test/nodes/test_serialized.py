@@ -5,6 +5,7 @@ serialization gives."""
 from __future__ import annotations
 
 import math
+from typing import Any
 
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
 from nav_msgs.msg import Odometry
@@ -17,6 +18,7 @@ from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
 from tiltrov_ros.core import names
+from tiltrov_ros.nodes import plant_simulator
 from tiltrov_ros.nodes.base import TiltrovNode
 from tiltrov_ros.nodes.conversions import (
     fill_joint_state,
@@ -151,6 +153,24 @@ def test_sequences_of_messages_are_read_too() -> None:
                                     for child in ('base_link', 'thruster_1_link')])
         data = serialize_message(msg)
         assert reader.read(data) == deserialize_message(data, TFMessage)
+
+
+@pytest.mark.parametrize('msg_type, fill, count', [
+    (Clock, plant_simulator._clock_message, 0),
+    (JointState, plant_simulator._joint_message, plant_simulator._JOINT_VALUES),
+    (Odometry, plant_simulator._odom_message, plant_simulator._ODOM_VALUES)],
+    ids=['clock', 'joint_states', 'odom'])
+def test_the_plants_state_templates_serialize_the_filled_messages(msg_type: type, fill: Any,
+                                                                  count: int) -> None:
+    stamps = (lambda m: [m.clock]) if msg_type is Clock else (lambda m: [m.header.stamp])
+    template = SerializedTemplate(msg_type, fill, stamps, count)
+    rng = np.random.default_rng(7)
+    for _ in range(5):
+        values, ns = rng.normal(size=count), int(rng.integers(0, 10**12))
+        expected = deserialize_message(serialize_message(fill(values, ns)), msg_type)
+        assert deserialize_message(template.serialize(ns, values), msg_type) == expected
+        assert deserialize_message(template.serialize(ns, list(values)), msg_type) == expected
+        assert template.message(values, ns) == expected
 
 
 def test_publish_serialized_never_sends_a_non_finite_value(ros) -> None:
