@@ -74,6 +74,21 @@ def test_a_repeated_tick_is_published_again_and_a_clock_going_back_restarts(rig)
     assert node.restarts == 1
 
 
+def test_its_own_clock_reader_sets_the_nodes_clock(rig) -> None:
+    """The node takes each /clock sample once: its reader (reliable, every sample)
+    sets the node's clock too, so its time source subscribes to nothing."""
+    ros, _, clock, tick_clock = rig
+    node = _reference(ros)
+    assert ros.spin_until(lambda: clock.get_subscription_count() > 0)
+    readers = [i for i in node.get_subscriptions_info_by_topic('/clock')
+               if i.node_name == node.get_name()]
+    assert len(readers) == 1
+    for ns in (0, STEP, 7 * STEP, 3 * STEP):  # the last one goes back: time starts over
+        tick_clock(ns)
+    assert ros.spin_until(lambda: node.get_clock().now().nanoseconds == 3 * STEP)
+    assert node.time_source.jumps_back == 1 and node.clock_ns() == 3 * STEP
+
+
 def test_joining_late_starts_at_the_current_tick(rig) -> None:
     ros, probe, clock, tick_clock = rig
     _reference(ros, scenario='pitch_hold')

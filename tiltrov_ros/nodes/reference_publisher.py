@@ -64,7 +64,7 @@ HOLD_ORIGIN = ReferenceProfile(((),) * 6)
 class ReferencePublisher(TiltrovNode):
     """Publishes the reference at every control tick (see the module docstring)."""
 
-    reads_clock = True      # its own /clock reader rejects and counts bad samples
+    reads_clock = True      # its own /clock reader counts bad samples, sets the node's clock
 
     def __init__(self, *, node_name: str = REFERENCE, namespace: str | None = None,
                  context: Any = None, cli_args: Sequence[str] | None = None,
@@ -132,6 +132,7 @@ class ReferencePublisher(TiltrovNode):
     @input_callback(CLOCK)
     def _on_clock(self, msg: ClockMsg) -> None:
         ns = checked_stamp_ns(msg.clock.sec, msg.clock.nanosec)
+        self.time_source.clock_callback(msg)    # the node's clock: it has no reader of its own
         last = self._last_tick
         if last is not None and ns < last:
             self.restarts += 1

@@ -19,7 +19,10 @@ nodes check every input (``core/validation.py``):
 
 :func:`install` replaces a node's time source by this one (same subscription,
 same clocks); :class:`~tiltrov_ros.nodes.base.TiltrovNode` does it for every
-node of the package. Samples are decoded by a
+node of the package. A node that reads ``/clock`` itself (``reads_clock``: the
+reference publisher) hands each valid sample to :meth:`CheckedTimeSource.clock_callback`
+from its own reader, and the time source subscribes to nothing: each sample is
+taken once per node. Samples are decoded by a
 :class:`~tiltrov_ros.nodes.serialized.MessageReader` (no message object per sample).
 """
 
@@ -57,9 +60,11 @@ class CheckedTimeSource(TimeSource):
     def _subscribe_to_clock_topic(self) -> None:
         """rclpy's subscription (same topic and QoS: the latest sample, best effort), but
         raw: the node decodes each sample (:meth:`TiltrovNode.decode`), so bytes that
-        do not decode are rejected and counted instead of dropped unseen."""
+        do not decode are rejected and counted instead of dropped unseen. None for a
+        node that reads /clock itself (``reads_clock``): its reader hands each valid
+        sample to :meth:`clock_callback`, so each sample is taken once."""
         node = self._get_node()
-        if self._clock_sub is None and node is not None:
+        if self._clock_sub is None and node is not None and not self._owner.reads_clock:
             self._clock_sub = node.create_subscription(
                 ClockMsg, CLOCK, self._on_clock_bytes,
                 QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT), raw=True)
