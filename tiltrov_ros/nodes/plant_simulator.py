@@ -141,7 +141,7 @@ def _odom_message(values: Any, ns: int) -> Odometry:
 class PlantSimulator(TiltrovNode):
     """The simulated robot (see the module docstring)."""
 
-    kernel_groups = ('plant',)
+    kernel_groups = ('plant', 'visual')     # the step; robot_markers' scene
 
     def __init__(self, *, node_name: str = PLANT, namespace: str | None = None,
                  context: Any = None, cli_args: Sequence[str] | None = None,
