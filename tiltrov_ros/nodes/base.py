@@ -12,6 +12,7 @@ import time
 from typing import Any, ClassVar
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
@@ -119,12 +120,14 @@ class SafePublisher:
         return False
 
     def publish_serialized(self, template: SerializedTemplate, ns: int,
-                           values: Sequence[float]) -> bool:
+                           values: Sequence[float] | np.ndarray) -> bool:
         """Publish the message of ``template`` holding ``values`` stamped ``ns`` as
         bytes rewritten in place (:class:`~tiltrov_ros.nodes.serialized.SerializedTemplate`:
         no message object, no conversion of its fields), as :meth:`publish` would
         publish it: a value not finite sends the message object through :meth:`publish`
         (withheld, counted, replaced by the safe answer)."""
+        if isinstance(values, np.ndarray):
+            values = values.tolist()
         if not all(map(math.isfinite, values)):
             return self.publish(template.message(values, ns))
         data = template.serialize(ns, values)
