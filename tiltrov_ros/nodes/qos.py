@@ -40,6 +40,14 @@ PUBLISHER_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
 CLOCK_READER_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
                               durability=DurabilityPolicy.VOLATILE,
                               history=HistoryPolicy.KEEP_LAST, depth=100)
+#: The plant's per-step topics (``/clock``, ``joint_states``, ``odom``, ``/tf``): as
+#: :data:`PUBLISHER_QOS`, ten times deeper. Lockstep publishes them thousands of times per
+#: wall second, so 1000 samples were a third of a second of a recorder's lag; 10000 are
+#: 100 s of sim time, as deep as the recorder's own queues (Fast DDS frees what every
+#: reader acknowledged: a reader that keeps up costs no memory).
+STATE_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.VOLATILE,
+                       history=HistoryPolicy.KEEP_LAST, depth=10000)
 #: Written once and kept for every reader, late ones too (``/tf_static``,
 #: ``robot_description``): reliable, transient local, the last sample, as tf2's static
 #: broadcaster and robot_state_publisher offer them.
