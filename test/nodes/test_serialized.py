@@ -192,3 +192,48 @@ def test_publish_serialized_never_sends_a_non_finite_value(ros) -> None:
     assert sent == [[1.0, 6.0], [0.0, 0.0]]
     assert probe.stamps(topic) == [5, 99]
     assert node.unsafe == {topic: 1} and pub.published == 2
+
+
+def test_wrench_and_joint_templates_hold_their_messages_and_no_other() -> None:
+    from tiltrov_ros.nodes.conversions import joint_template, wrench_template
+    rng = np.random.default_rng(8)
+    template, values = wrench_template()
+    msg = _wrench(rng)
+    ns = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+    assert deserialize_message(template.serialize(ns, values(msg)), WrenchStamped) == msg
+    msg.header.frame_id = names.FRAME_BODY_FLU
+    assert values(msg) is None
+    template, values = joint_template(names.THRUSTERS, 'effort')
+    msg = fill_joint_state(new_joint_state(names.THRUSTERS), 12345, effort=rng.normal(size=4))
+    assert deserialize_message(template.serialize(12345, values(msg)), JointState) == msg
+    for other in (fill_joint_state(new_joint_state(names.TILTS), 1, effort=[1.0, 2.0]),
+                  fill_joint_state(new_joint_state(names.THRUSTERS), 1, effort=[1.0] * 4,
+                                   position=[0.0] * 4),
+                  fill_joint_state(new_joint_state(names.THRUSTERS), 1, effort=[1.0] * 3)):
+        assert values(other) is None
+    failsafe = fill_joint_state(new_joint_state(names.THRUSTERS), 1, effort=[0.0] * 4)
+    failsafe.header.frame_id = names.FAILSAFE_FRAME
+    assert values(failsafe) is None
+
+
+def test_a_publisher_serializing_as_a_template_sends_what_rclpy_would(ros) -> None:
+    """serialize_as: the template's messages go out as its bytes, any other message through
+    rclpy, a message not finite is withheld and replaced: the reader cannot tell."""
+    from tiltrov_ros.nodes.conversions import joint_template
+    node = ros.add(TiltrovNode('serialize_as_test', context=ros.context))
+    topic = names.THRUST_CMD
+    pub = node.create_safe_publisher(
+        JointState, topic, KEEP_ALL,
+        lambda msg: fill_joint_state(new_joint_state(names.THRUSTERS), 77, effort=[0.0] * 4))
+    pub.serialize_as(*joint_template(names.THRUSTERS, 'effort'))
+    probe = Probe(ros.node('serialize_as_probe'), [topic])
+    assert ros.spin_until(lambda: pub.get_subscription_count() == 1)
+    plain = fill_joint_state(new_joint_state(names.THRUSTERS), 5, effort=[1.0, 2.0, 3.0, 4.0])
+    marked = fill_joint_state(new_joint_state(names.THRUSTERS), 6, effort=[0.0] * 4)
+    marked.header.frame_id = names.FAILSAFE_FRAME
+    broken = fill_joint_state(new_joint_state(names.THRUSTERS), 7, effort=[1.0, math.nan, 0, 0])
+    assert pub.publish(plain) and pub.publish(marked) and not pub.publish(broken)
+    assert ros.spin_until(lambda: len(probe[topic]) == 3)
+    assert probe[topic][:2] == [plain, marked]
+    assert probe.stamps(topic) == [5, 6, 77] and list(probe[topic][2].effort) == [0.0] * 4
+    assert node.unsafe == {topic: 1} and pub.published == 3

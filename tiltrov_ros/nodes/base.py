@@ -39,7 +39,7 @@ from tiltrov_ros.core.names import (
 from tiltrov_ros.core.paramtable import Param, ParamTable
 from tiltrov_ros.core.validation import InvalidInput
 
-from .conversions import message_is_finite, set_stamp
+from .conversions import Values, message_is_finite, set_stamp, stamp_ns
 from .guard import THROTTLE, InputGuard, guarded
 from .parameters import (
     Overrides,
@@ -102,12 +102,26 @@ class SafePublisher:
                       else resolved)
         self._safe = safe
         self.published = 0
+        self._template: tuple[SerializedTemplate, Values] | None = None
+
+    def serialize_as(self, template: SerializedTemplate, values: Values) -> None:
+        """From now on publish a message whose numbers ``values(msg)`` reads (not None: the
+        template holds that message) as ``template``'s bytes, without rclpy's conversion
+        of its fields (nodes/serialized.py); any other message as before."""
+        self._template = (template, values)
 
     def publish(self, msg: Any) -> bool:
         """Publish ``msg`` if it is finite, else its safe replacement; True if ``msg`` went
         (or is held until the recorder reads this topic, see ``wait_for_recorder``)."""
         if self.node.hold_output(self, msg):
             return True
+        if self._template is not None and not isinstance(msg, bytes):
+            template, read = self._template
+            values = read(msg)
+            if values is not None and all(map(math.isfinite, values)):
+                self.publisher.publish(template.serialize(stamp_ns(msg.header.stamp), values))
+                self.published += 1
+                return True
         if message_is_finite(msg):
             self.publisher.publish(msg)
             self.published += 1
