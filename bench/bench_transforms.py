@@ -65,13 +65,12 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
         transforms = with_tf.transforms
         first = with_tf.plant.sample()
         samples = [first._replace(tilts=(1e-4 * i, -2e-4 * i)) for i in range(args.steps)]
-        msg = transforms._message(transforms._values, 0)
+        msg = transforms._message(transforms.values(first), 0)
         raw = transforms.publisher.publisher
 
         def objects(i: int) -> None:
             """The baseline: the same numbers into the message objects, then publish."""
-            transforms.update(samples[i])
-            values = transforms._values
+            values = transforms.values(samples[i])
             for k, t in enumerate(msg.transforms):
                 t.header.stamp.sec, t.header.stamp.nanosec = 0, i
                 r = t.transform.rotation

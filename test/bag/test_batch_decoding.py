@@ -143,3 +143,47 @@ def test_walk_refuses_what_it_cannot_read() -> None:
     batches.add(data[:-40], 1)
     with pytest.raises(Exception):  # noqa: B017 - rosbags' own error for a truncated message
         batches.series()
+
+
+@pytest.mark.parametrize('msgtype', sorted({*STACK_TOPICS.values(), *names.TF_TOPICS.values()}))
+def test_the_python_classes_give_the_type_stores_layout(msgtype: str) -> None:
+    """walk() with the fields of the generated Python classes (what the nodes use, no type
+    store to load) finds the layout the type store's fields give."""
+    data = serialize(M.store.types[msgtype](**_defaults(msgtype)), msgtype)
+    assert cdr.walk(data, msgtype, cdr.python_fields) == cdr.walk(data, msgtype)
+    assert [name for name, _ in cdr.python_fields(msgtype)] == [
+        name for name, _ in STORE.fielddefs[msgtype][1]]
+
+
+def test_the_python_classes_fields_of_stamped_odometry_and_joints() -> None:
+    for data, msgtype in ((serialize(odom(3, 'a_frame'), ODOM), ODOM),
+                          (serialize(joints(2, ('tilt_front', 'thruster_1')), JOINTS), JOINTS),
+                          (serialize(joints(1, ('x',), effort=False), JOINTS, big_endian=True),
+                           JOINTS)):
+        assert cdr.walk(data, msgtype, cdr.python_fields) == cdr.walk(data, msgtype)
+    with pytest.raises(cdr.LayoutError, match='my_pkg'):
+        cdr.walk(serialize(odom(1), ODOM), 'my_pkg/msg/Unknown', cdr.python_fields)
+
+
+def _defaults(msgtype: str) -> dict[str, Any]:
+    """Every field of ``msgtype`` at a default value, as rosbags' classes want them."""
+    out: dict[str, Any] = {}
+    for name, (kind, detail) in STORE.fielddefs[msgtype][1]:
+        if kind == 1:       # base type
+            out[name] = '' if detail[0] == 'string' else (
+                False if detail[0] == 'bool' else 0)
+        elif kind == 2:     # nested message
+            out[name] = STORE.types[detail](**_defaults(detail))
+        elif kind == 3:     # fixed-size array
+            out[name] = np.zeros(detail[1], dtype=np.float64)
+        else:               # sequence: empty
+            sub = detail[0]
+            out[name] = ([] if sub[0] != 1 or sub[1][0] in ('string',)
+                         else np.zeros(0, dtype=_NUMPY.get(sub[1][0], np.float64)))
+    return out
+
+
+_NUMPY = {'float64': np.float64, 'float32': np.float32, 'int32': np.int32, 'uint32': np.uint32,
+          'uint8': np.uint8, 'int8': np.int8, 'uint16': np.uint16, 'int16': np.int16,
+          'int64': np.int64, 'uint64': np.uint64, 'bool': np.bool_, 'byte': np.uint8,
+          'char': np.uint8}

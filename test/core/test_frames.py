@@ -81,3 +81,30 @@ def test_the_static_relations_are_rep_105s() -> None:
     np.testing.assert_allclose(Rquat(EARTH_RELATION),
                                [[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]], atol=1e-15)
     np.testing.assert_allclose(Rquat(BODY_RELATION), np.diag([1.0, -1.0, -1.0]), atol=1e-15)
+
+
+@given(st.lists(st.floats(-5.0, 5.0), min_size=3, max_size=3),
+       st.lists(st.floats(-2.0, 2.0), min_size=4, max_size=4).filter(
+           lambda q: sum(v * v for v in q) > 1e-6))
+def test_the_plain_float_pose_is_the_matrix_one(position: list[float],
+                                                quaternion: list[float]) -> None:
+    """pose_ned_to_enu_values (what the plant writes into /tf) is the pose the derivation
+    gives: R_ned_enu^T p, and the normalized quaternion times _TO_ENU, w >= 0."""
+    from tiltrov_ros.core.frames import _NED_ENU, _TO_ENU, pose_ned_to_enu_values
+    from tiltrov_ros.core.kinematics import quat_normalize
+    values = pose_ned_to_enu_values(position, quaternion)
+    q = _TO_ENU @ quat_normalize(quaternion)
+    q = -q if q[0] < 0 else q
+    np.testing.assert_allclose(values[:3], _NED_ENU.T @ position, rtol=0, atol=0)
+    np.testing.assert_allclose(values[3:], q, rtol=0, atol=1e-15)
+    assert values[3] >= 0.0
+
+
+@pytest.mark.parametrize('quaternion', [[0.0] * 4, [math.nan, 0.0, 0.0, 1.0],
+                                        [math.inf, 0.0, 0.0, 0.0]])
+def test_the_plain_float_pose_refuses_a_quaternion_that_is_none(quaternion) -> None:
+    from tiltrov_ros.core.frames import pose_ned_to_enu, pose_ned_to_enu_values
+    with pytest.raises(ValueError, match='not a valid quaternion'):
+        pose_ned_to_enu_values([0.0, 0.0, 0.0], quaternion)
+    with pytest.raises(ValueError, match='not a valid quaternion'):
+        pose_ned_to_enu([0.0, 0.0, 0.0], quaternion)

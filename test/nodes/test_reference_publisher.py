@@ -74,6 +74,21 @@ def test_a_repeated_tick_is_published_again_and_a_clock_going_back_restarts(rig)
     assert node.restarts == 1
 
 
+def test_its_own_clock_reader_sets_the_nodes_clock(rig) -> None:
+    """The node takes each /clock sample once: its reader (reliable, every sample)
+    sets the node's clock too, so its time source subscribes to nothing."""
+    ros, _, clock, tick_clock = rig
+    node = _reference(ros)
+    assert ros.spin_until(lambda: clock.get_subscription_count() > 0)
+    readers = [i for i in node.get_subscriptions_info_by_topic('/clock')
+               if i.node_name == node.get_name()]
+    assert len(readers) == 1
+    for ns in (0, STEP, 7 * STEP, 3 * STEP):  # the last one goes back: time starts over
+        tick_clock(ns)
+    assert ros.spin_until(lambda: node.get_clock().now().nanoseconds == 3 * STEP)
+    assert node.time_source.jumps_back == 1 and node.clock_ns() == 3 * STEP
+
+
 def test_joining_late_starts_at_the_current_tick(rig) -> None:
     ros, probe, clock, tick_clock = rig
     _reference(ros, scenario='pitch_hold')
@@ -109,3 +124,30 @@ def test_a_malformed_clock_is_rejected_counted_and_the_next_answered(rig) -> Non
     assert finite_outputs(probe)
     values = report(ros, diag, node)
     assert values['rejected./clock.bad_stamp'] == '1' and values['callback_errors'] == '0'
+
+
+def test_a_reference_not_finite_goes_out_as_the_last_good_setpoint(rig) -> None:
+    """A reference with a NaN (a broken scenario) is withheld and counted: the last good
+    setpoint goes out instead, held, with zero feed-forward."""
+    ros, probe, clock, tick_clock = rig
+    node = _reference(ros, scenario='trajectory')
+    profile = node.profile
+
+    class Broken:
+        def at(self, t: float):
+            ref = profile.at(t)
+            return ref if t < 0.075 else ref._replace(position=ref.position * np.nan,
+                                                       velocity=ref.velocity * np.nan)
+
+    node.profile = Broken()
+    assert ros.spin_until(lambda: clock.get_subscription_count() > 0)
+    for ns in (0, TICK, 2 * TICK):
+        tick_clock(ns)
+    assert ros.spin_until(lambda: probe.stamps('setpoint') == [0, TICK, 2 * TICK])
+    assert ros.spin_until(lambda: probe.stamps('setpoint_velocity') == [0, TICK, 2 * TICK])
+    assert finite_outputs(probe)
+    good, held = probe['setpoint'][1], probe['setpoint'][2]
+    assert held.pose == good.pose
+    v = probe['setpoint_velocity'][2].twist
+    assert [v.linear.x, v.linear.y, v.angular.z] == [0.0, 0.0, 0.0]
+    assert node.unsafe == {'setpoint': 1, 'setpoint_velocity': 1}

@@ -13,14 +13,17 @@ each aligned to its own size counted from the end of the encapsulation header.
   are decoded with numpy (:func:`same_structure`, :func:`read_leaves`,
   :func:`read_stamps`) instead of one deserialization per message: this is
   how the bag reader decodes the stack's topics (about ten times faster than
-  rosbags' per-message decoder, same values to the bit).
+  rosbags' per-message decoder, same values to the bit). The field lists come
+  from rosbags' type store, or, with :func:`python_fields`, from the generated
+  Python classes (what the nodes use: no type store to load).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import cache
+import re
 import struct
 from typing import Any
 
@@ -29,7 +32,8 @@ from numpy.typing import NDArray
 
 from tiltrov_ros.core.timebase import CDR_ENCAPSULATION, NS_PER_S, cdr_stamp_ns
 
-from .msgdefs import typestore
+from .msgdefs import IDL_TO_MSG, message_class, typestore
+from .topics import normalize_type
 
 ENCAPSULATION = CDR_ENCAPSULATION
 _STAMPED_FIRST = ('std_msgs/msg/Header', 'builtin_interfaces/msg/Time')
@@ -67,6 +71,12 @@ _DTYPES = {'bool': 'u1', 'byte': 'u1', 'char': 'u1', 'int8': 'i1', 'uint8': 'u1'
            'uint64': 'u8', 'float32': 'f4', 'float64': 'f8'}
 # rosbags' Nodetype values
 _BASE, _NAME, _ARRAY, _SEQUENCE = 1, 2, 3, 4
+#: A field's type in rosbags' form: (node type, detail).
+FieldDesc = tuple[int, Any]
+#: The fields of a message type, in order: ``fields(msgtype)`` -> [(name, FieldDesc)].
+Fields = Callable[[str], Sequence[tuple[str, FieldDesc]]]
+_SEQUENCE_IDL = re.compile(r'^sequence<(?P<inner>.+?)(?:,\s*(?P<bound>\d+))?>$')
+_ARRAY_IDL = re.compile(r'^(?P<inner>.+)\[(?P<size>\d+)\]$')
 
 
 class LayoutError(ValueError):
@@ -98,11 +108,48 @@ class Layout:
         return np.concatenate([np.arange(a, b) for a, b in self.structure]).astype(np.intp)
 
 
-def walk(data: bytes, msgtype: str) -> Layout:
+def store_fields(msgtype: str) -> Sequence[tuple[str, FieldDesc]]:
+    """The fields of ``msgtype`` in rosbags' ROS 2 Jazzy type store."""
+    definition = typestore().fielddefs.get(msgtype)
+    if definition is None:
+        raise LayoutError(f'{msgtype} is not in the type store')
+    return definition[1]  # type: ignore[no-any-return]
+
+
+def _idl_desc(idl: str) -> FieldDesc:
+    """rosbags' form of one field type in rosidl's IDL spelling (``sequence<double>``,
+    ``double[36]``, ``string``, ``std_msgs/Header``)."""
+    if match := _SEQUENCE_IDL.match(idl):
+        return _SEQUENCE, (_idl_desc(match['inner']), int(match['bound'] or 0))
+    if match := _ARRAY_IDL.match(idl):
+        return _ARRAY, (_idl_desc(match['inner']), int(match['size']))
+    if idl.startswith(('string<=', 'wstring<=')):
+        kind, _, bound = idl.partition('<=')
+        return _BASE, (kind, int(bound))
+    if idl in IDL_TO_MSG:
+        return _BASE, (IDL_TO_MSG[idl], 0)
+    if '/' in idl:
+        return _NAME, normalize_type(idl)
+    raise LayoutError(f'unsupported field type {idl!r}')
+
+
+@cache
+def python_fields(msgtype: str) -> tuple[tuple[str, FieldDesc], ...]:
+    """The fields of ``msgtype`` from its generated Python class (rosidl's field list), in
+    the type store's form: :func:`walk` with them needs no type store."""
+    try:
+        cls = message_class(msgtype)
+    except Exception as exc:  # BagError: not importable
+        raise LayoutError(str(exc)) from None
+    fields = cls.get_fields_and_field_types()  # type: ignore[attr-defined]
+    return tuple((name, _idl_desc(idl)) for name, idl in fields.items())
+
+
+def walk(data: bytes, msgtype: str, fields: Fields = store_fields) -> Layout:
     """The :class:`Layout` of one serialized message of ``msgtype`` (XCDR1 rules:
     each primitive aligned to its size from the end of the encapsulation; a
-    sequence's elements aligned only when there are some)."""
-    store = typestore()
+    sequence's elements aligned only when there are some). ``fields`` gives each
+    type's fields (default: the type store's; :func:`python_fields`)."""
     if len(data) < ENCAPSULATION or data[0] != 0 or data[1] not in (0, 1):
         raise LayoutError(f'{msgtype}: not a CDR encapsulation')
     order = '<' if data[1] == 1 else '>'
@@ -165,10 +212,7 @@ def walk(data: bytes, msgtype: str) -> Layout:
             raise LayoutError(f'{msgtype}: {path} has the unsupported node type {nodetype}')
 
     def message(prefix: str, name: str) -> None:
-        definition = store.fielddefs.get(name)
-        if definition is None:
-            raise LayoutError(f'{name} is not in the type store')
-        for field_name, desc in definition[1]:
+        for field_name, desc in fields(name):
             element(f'{prefix}.{field_name}' if prefix else field_name, desc)
 
     message('', msgtype)

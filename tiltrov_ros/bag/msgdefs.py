@@ -22,8 +22,8 @@ from .topics import normalize_type
 
 SEPARATOR = '=' * 80
 
-# IDL names (as rosidl's Python classes report them) -> .msg names
-_IDL_TO_MSG = {
+#: IDL names (as rosidl's Python classes report them) -> .msg names.
+IDL_TO_MSG = {
     'double': 'float64', 'float': 'float32', 'long double': 'float64',
     'boolean': 'bool', 'octet': 'byte',
     'int8': 'int8', 'uint8': 'uint8', 'int16': 'int16', 'uint16': 'uint16',
@@ -90,8 +90,8 @@ def _field_type(idl: str, deps: list[str]) -> str:
         return f"{_field_type(match['inner'], deps)}[{match['size']}]"
     if idl.startswith(('string<=', 'wstring<=')):
         return idl
-    if idl in _IDL_TO_MSG:
-        return _IDL_TO_MSG[idl]
+    if idl in IDL_TO_MSG:
+        return IDL_TO_MSG[idl]
     if '/' in idl:  # nested message, 'pkg/Type'
         deps.append(idl)
         return idl

@@ -2,7 +2,7 @@
 
 ::
 
-    tiltrov warmup                  # every group: allocation, plant, control
+    tiltrov warmup                  # every group: allocation, plant, control, visual
     tiltrov warmup plant control
 
 Prints the backend, where the compiled code is cached and, per group, the

@@ -24,6 +24,7 @@ Pure numpy; the nodes call these on the arrays of a message.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 import math
 
 import numpy as np
@@ -90,5 +91,24 @@ def pose_ned_to_enu(position: ArrayLike, quaternion: ArrayLike
     """The pose of ``base_link_frd`` in ``odom_ned`` -> that of ``base_link`` in ``odom``
     (position, quaternion (w, x, y, z)): the transform ``odom -> base_link``. Raises
     ValueError for a quaternion that is zero or not finite."""
-    p = _NED_ENU.T @ np.asarray(position, dtype=float)
-    return p, _positive(_TO_ENU @ quat_normalize(quaternion))
+    values = pose_ned_to_enu_values(np.asarray(position, dtype=float).tolist(),
+                                    np.asarray(quaternion, dtype=float).tolist())
+    return np.array(values[:3]), np.array(values[3:])
+
+
+def pose_ned_to_enu_values(position: Sequence[float], quaternion: Sequence[float]
+                           ) -> tuple[float, ...]:
+    """:func:`pose_ned_to_enu` in plain floats, the 7 numbers (x, y, z, w, qx, qy, qz):
+    ``position`` (north, east, down) -> (east, north, up), and the unit quaternion times
+    :data:`_TO_ENU`, whose rows are written out (the plant converts its pose at every
+    step for /tf)."""
+    north, east, down = position
+    w, x, y, z = quaternion
+    norm = math.sqrt(w * w + x * x + y * y + z * z)
+    if not math.isfinite(norm) or norm == 0.0:
+        raise ValueError(f'not a valid quaternion: {list(quaternion)!r}')
+    k = _S / norm
+    q = (-k * (w + z), -k * (x + y), k * (y - x), k * (z - w))
+    if q[0] < 0:
+        q = (-q[0], -q[1], -q[2], -q[3])
+    return (east, north, -down, *q)

@@ -65,6 +65,7 @@ GROUPS: dict[str, tuple[str, ...]] = {
     'allocation': ('tiltrov_ros.core.allocation',),
     'plant': ('tiltrov_ros.core.plant_kernels',),
     'control': ('tiltrov_ros.core.control_kernels',),
+    'visual': ('tiltrov_ros.core.visual_kernels',),
 }
 
 _PACKAGE_DIR = Path(__file__).resolve().parent.parent
@@ -254,7 +255,7 @@ def kernel(*signatures: str, group: str = '') -> Callable[[F], F]:
 
     ``signatures``: numba type strings of the calls made from Python (compiled
     ahead by :func:`warmup`); ``group``: which warm-up set it belongs to
-    (``'allocation'``, ``'plant'``, ``'control'``); required with signatures.
+    (``'allocation'``, ``'plant'``, ``'control'``, ``'visual'``); required with signatures.
     """
     if signatures and not group:
         raise ValueError('a kernel called from Python needs a warm-up group')

@@ -83,18 +83,23 @@ def tilt_joints(length: float, width: float) -> tuple[TiltJoint, ...]:
     return tuple(out)
 
 
-def link_quaternions(joints: tuple[TiltJoint, ...], tilt_front: float, tilt_rear: float,
-                     out: FloatArray | None = None) -> FloatArray:
+def link_quaternions(joints: tuple[TiltJoint, ...], tilt_front: float, tilt_rear: float
+                     ) -> FloatArray:
     """Orientation (w, x, y, z) of each thruster link in ``base_link_frd`` at the tilts,
-    shape (4, 4): ``q_z(yaw) q_y(gamma)`` written out. Written into ``out`` when given
-    (the plant refills one buffer at every step)."""
-    out = np.empty((len(joints), 4)) if out is None else out
+    shape (4, 4): ``q_z(yaw) q_y(gamma)`` written out (:func:`link_quaternion_values`)."""
+    return np.array(link_quaternion_values(joints, tilt_front, tilt_rear)).reshape(-1, 4)
+
+
+def link_quaternion_values(joints: tuple[TiltJoint, ...], tilt_front: float,
+                           tilt_rear: float) -> list[float]:
+    """:func:`link_quaternions` as one flat list of plain floats (w, x, y, z of each link
+    in turn: what the plant writes into /tf at every step)."""
+    out: list[float] = []
     half = (0.5 * tilt_front, 0.5 * tilt_rear)
-    for i, joint in enumerate(joints):
+    for joint in joints:
         cz, sz = math.cos(0.5 * joint.yaw), math.sin(0.5 * joint.yaw)
         cy, sy = math.cos(half[joint.tilt]), math.sin(half[joint.tilt])
-        row = out[i]
-        row[0], row[1], row[2], row[3] = cz * cy, -sz * sy, cz * sy, sz * cy
+        out += (cz * cy, -sz * sy, cz * sy, sz * cy)
     return out
 
 

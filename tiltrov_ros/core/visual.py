@@ -14,16 +14,23 @@ wrench (``wrench_cmd``, ``wrench_achieved``), :func:`robot_scene` places, in
   (``moment_scale`` m per N m) as arrows from the body origin, rotated into
   the earth frame.
 
-Pure numpy; the visualizer node turns a :class:`Scene` into messages.
+Pure numpy; the visualizer node turns a :class:`Scene` into messages. The plant
+takes the scene's numbers flat (:func:`robot_scene_values`, in
+:data:`SCENE_FIELDS` order), from a compiled kernel when the kernels run
+(:mod:`tiltrov_ros.core.visual_kernels`; :func:`robot_scene` is its reference).
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+import math
+from typing import cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from tiltrov_ros.core import jit
 from tiltrov_ros.core.kinematics import Rquat, quat_normalize
 from tiltrov_ros.core.thrust_map import thruster_directions, thruster_positions
 
@@ -112,3 +119,63 @@ def robot_scene(position: ArrayLike, quaternion: ArrayLike, length: float, width
         force_achieved=from_body(achieved[:3], scales.force),
         moment_demanded=from_body(demanded[3:], scales.moment),
         moment_achieved=from_body(achieved[3:], scales.moment))
+
+
+#: The Scene's fields in the order of their numbers in :func:`scene_values` (the body's
+#: size too: it is the robot's), and their shapes.
+SCENE_FIELDS = ('body_position', 'body_quaternion', 'body_size', 'thruster_positions',
+                'thruster_quaternions', 'thrust_actual', 'thrust_commanded', 'force_demanded',
+                'force_achieved', 'moment_demanded', 'moment_achieved')
+SCENE_SHAPES = {'body_position': (3,), 'body_quaternion': (4,), 'body_size': (3,),
+                'thruster_positions': (4, 3), 'thruster_quaternions': (4, 4),
+                'thrust_actual': (4, 2, 3), 'thrust_commanded': (4, 2, 3),
+                'force_demanded': (2, 3), 'force_achieved': (2, 3), 'moment_demanded': (2, 3),
+                'moment_achieved': (2, 3)}
+#: Numbers in a scene (110).
+SCENE_SIZE = sum(math.prod(shape) for shape in SCENE_SHAPES.values())
+
+
+def scene_values(scene: Scene) -> FloatArray:
+    """Every number of ``scene``, flat, in :data:`SCENE_FIELDS` order."""
+    return np.concatenate([np.asarray(getattr(scene, f), dtype=float).ravel()
+                           for f in SCENE_FIELDS])
+
+
+def scene_of(values: ArrayLike) -> Scene:
+    """The :class:`Scene` of :func:`scene_values`' numbers."""
+    flat = np.asarray(values, dtype=float)
+    parts, start = {}, 0
+    for f in SCENE_FIELDS:
+        n = math.prod(SCENE_SHAPES[f])
+        parts[f] = flat[start:start + n].reshape(SCENE_SHAPES[f])
+        start += n
+    return Scene(**parts)
+
+
+def robot_scene_values(position: ArrayLike, quaternion: ArrayLike, length: float,
+                       width: float, *, tilts: ArrayLike, thrusts: ArrayLike,
+                       commanded_tilts: ArrayLike, commanded_thrusts: ArrayLike,
+                       wrench_cmd: ArrayLike, wrench_achieved: ArrayLike,
+                       scales: Scales = Scales()) -> FloatArray:
+    """``scene_values(robot_scene(...))``: compiled when the kernels run (one call of
+    :func:`~tiltrov_ros.core.visual_kernels.scene_kernel`), else the reference. Raises
+    ValueError for a quaternion that is zero or not finite, as :func:`robot_scene`."""
+    if not jit.compiled():
+        return scene_values(robot_scene(
+            position, quaternion, length, width, tilts=tilts, thrusts=thrusts,
+            commanded_tilts=commanded_tilts, commanded_thrusts=commanded_thrusts,
+            wrench_cmd=wrench_cmd, wrench_achieved=wrench_achieved, scales=scales))
+    from tiltrov_ros.core.visual_kernels import IN_SIZE, scene_kernel
+    vectors = cast(tuple[Sequence[float], ...], (position, quaternion, tilts, thrusts,
+                                                  commanded_tilts, commanded_thrusts,
+                                                  wrench_cmd, wrench_achieved))
+    inputs = np.array([length, width, *(v for vector in vectors for v in vector),
+                       scales.thrust, scales.force, scales.moment], dtype=np.float64)
+    if inputs.shape != (IN_SIZE,):
+        raise ValueError(f'robot_scene_values: {inputs.shape[0]} numbers; {IN_SIZE} expected')
+    norm = math.sqrt(sum(v * v for v in inputs[5:9].tolist()))
+    if not math.isfinite(norm) or norm == 0.0:
+        raise ValueError(f'not a valid quaternion: {inputs[5:9]!r}')
+    out = np.empty(SCENE_SIZE)
+    scene_kernel(inputs, out)
+    return out

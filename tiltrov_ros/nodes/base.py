@@ -7,10 +7,12 @@ from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Callable, Sequence
+import math
 import time
 from typing import Any, ClassVar
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
@@ -37,7 +39,7 @@ from tiltrov_ros.core.names import (
 from tiltrov_ros.core.paramtable import Param, ParamTable
 from tiltrov_ros.core.validation import InvalidInput
 
-from .conversions import message_is_finite, set_stamp
+from .conversions import Values, message_is_finite, set_stamp, stamp_ns
 from .guard import THROTTLE, InputGuard, guarded
 from .parameters import (
     Overrides,
@@ -50,6 +52,7 @@ from .parameters import (
     parameter_source,
 )
 from .qos import RELIABLE_QOS
+from .serialized import SerializedTemplate
 from .simclock import install as install_time_source
 
 #: s (wall): period of the /diagnostics messages.
@@ -99,12 +102,26 @@ class SafePublisher:
                       else resolved)
         self._safe = safe
         self.published = 0
+        self._template: tuple[SerializedTemplate, Values] | None = None
+
+    def serialize_as(self, template: SerializedTemplate, values: Values) -> None:
+        """From now on publish a message whose numbers ``values(msg)`` reads (not None: the
+        template holds that message) as ``template``'s bytes, without rclpy's conversion
+        of its fields (nodes/serialized.py); any other message as before."""
+        self._template = (template, values)
 
     def publish(self, msg: Any) -> bool:
         """Publish ``msg`` if it is finite, else its safe replacement; True if ``msg`` went
         (or is held until the recorder reads this topic, see ``wait_for_recorder``)."""
         if self.node.hold_output(self, msg):
             return True
+        if self._template is not None and not isinstance(msg, bytes):
+            template, read = self._template
+            values = read(msg)
+            if values is not None and all(map(math.isfinite, values)):
+                self.publisher.publish(template.serialize(stamp_ns(msg.header.stamp), values))
+                self.published += 1
+                return True
         if message_is_finite(msg):
             self.publisher.publish(msg)
             self.published += 1
@@ -115,6 +132,24 @@ class SafePublisher:
             self.publisher.publish(replacement)
             self.published += 1
         return False
+
+    def publish_serialized(self, template: SerializedTemplate, ns: int,
+                           values: Sequence[float] | np.ndarray) -> bool:
+        """Publish the message of ``template`` holding ``values`` stamped ``ns`` as
+        bytes rewritten in place (:class:`~tiltrov_ros.nodes.serialized.SerializedTemplate`:
+        no message object, no conversion of its fields), as :meth:`publish` would
+        publish it: a value not finite sends the message object through :meth:`publish`
+        (withheld, counted, replaced by the safe answer)."""
+        if isinstance(values, np.ndarray):
+            values = values.tolist()
+        if not all(map(math.isfinite, values)):
+            return self.publish(template.message(values, ns))
+        data = template.serialize(ns, values)
+        if self.node.hold_output(self, data):
+            return True
+        self.publisher.publish(data)
+        self.published += 1
+        return True
 
     def get_subscription_count(self) -> int:
         return int(self.publisher.get_subscription_count())

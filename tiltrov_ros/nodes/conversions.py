@@ -25,6 +25,8 @@ from tiltrov_ros.core import validation
 from tiltrov_ros.core.names import FRAME_BODY, FRAME_EARTH
 from tiltrov_ros.core.timebase import ns_to_stamp, stamp_to_ns
 
+from .serialized import SerializedTemplate
+
 FloatArray = NDArray[np.float64]
 
 
@@ -146,6 +148,48 @@ def new_joint_state(names: Sequence[str]) -> JointState:
     msg = JointState()
     msg.name = list(names)
     return msg
+
+
+# --------------------------------------------------------------------------- serialized
+
+#: A message's numbers as a template holds them, or None for a message it does not hold.
+Values = Callable[[Any], Sequence[float] | None]
+
+
+def _header_stamp(msg: Any) -> list[Time]:
+    return [msg.header.stamp]
+
+
+def wrench_template() -> tuple[SerializedTemplate, Values]:
+    """A ``WrenchStamped`` in ``base_link_frd`` (:func:`new_wrench`) as a serialized template,
+    and the numbers of such a message (X Y Z K M N)."""
+
+    def values(msg: WrenchStamped) -> list[float] | None:
+        if msg.header.frame_id != FRAME_BODY:
+            return None
+        f, t = msg.wrench.force, msg.wrench.torque
+        return [f.x, f.y, f.z, t.x, t.y, t.z]
+
+    return SerializedTemplate(WrenchStamped, lambda v, ns: fill_wrench(new_wrench(), ns, v),
+                              _header_stamp, 6), values
+
+
+def joint_template(names: Sequence[str], field: str) -> tuple[SerializedTemplate, Values]:
+    """A ``JointState`` of ``names`` with ``field`` (position, velocity or effort) only, no
+    frame, as a serialized template, and the numbers of such a message (``field``)."""
+    expected = list(names)
+    others = [f for f in ('position', 'velocity', 'effort') if f != field]
+
+    def values(msg: JointState) -> Sequence[float] | None:
+        numbers = getattr(msg, field)
+        if (msg.header.frame_id or msg.name != expected or len(numbers) != len(expected)
+                or any(len(getattr(msg, f)) for f in others)):
+            return None
+        return numbers      # type: ignore[no-any-return]
+
+    return SerializedTemplate(
+        JointState, lambda v, ns: fill_joint_state(new_joint_state(names), ns, **{field: v}),
+        _header_stamp, len(expected)), values
 
 
 # --------------------------------------------------------------------------- outgoing values

@@ -5,7 +5,9 @@ validation with rejection counts and bounded logs.
 of :class:`~tiltrov_ros.nodes.base.TiltrovNode`, which sets up its state) checks input
 stamps against the node's clock (:data:`STAMP_BOUNDS`) and frames, decodes raw
 subscriptions (bytes that do not decode are rejected as ``malformed``), counts and logs
-every rejection (core/validation.py says why a message is rejected).
+every rejection (core/validation.py says why a message is rejected). Subscriptions
+are raw and decoded by a :class:`~tiltrov_ros.nodes.serialized.MessageReader` per topic
+and type: the message a callback gets is refilled in place for the next one.
 """
 
 from __future__ import annotations
@@ -17,7 +19,6 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
-from rclpy.serialization import deserialize_message
 from rclpy.subscription import Subscription
 
 from tiltrov_ros.core import validation
@@ -26,6 +27,7 @@ from tiltrov_ros.core.timebase import NS_PER_S
 from tiltrov_ros.core.validation import MALFORMED, InvalidInput, StampBounds
 
 from .parameters import declare
+from .serialized import MessageReader
 
 if TYPE_CHECKING:
     from .base import TiltrovNode
@@ -118,6 +120,7 @@ class InputGuard:
         self.stamp_bounds = StampBounds()
         self._input_stamp: int | None = None
         self._reject_log: dict[tuple[str, str], tuple[int, int]] = {}
+        self._readers: dict[tuple[str, type], MessageReader] = {}
 
     # -- input validation -------------------------------------------------------
 
@@ -205,9 +208,14 @@ class InputGuard:
 
     def decode(self, msg_type: Any, topic: str, data: bytes) -> Any | None:
         """``data`` (serialized CDR) as a ``msg_type`` message, or None when it does not
-        decode (truncated, garbage): then rejected as ``malformed`` (counted, logged)."""
+        decode (truncated, garbage): then rejected as ``malformed`` (counted, logged).
+        The message is this topic's reader's object, refilled by the next message
+        (:class:`~tiltrov_ros.nodes.serialized.MessageReader`): keep numbers, not it."""
+        reader = self._readers.get((topic, msg_type))
+        if reader is None:
+            reader = self._readers[(topic, msg_type)] = MessageReader(msg_type)
         try:
-            return deserialize_message(data, msg_type)
+            return reader.read(data)
         except Exception:   # rclpy raises RMWError (Fast CDR: not enough bytes, ...)
             self.reject_malformed(topic, msg_type, data)
             return None

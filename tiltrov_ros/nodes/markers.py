@@ -9,7 +9,9 @@ cylinders along the thrust at the actual tilt), ``thrust_actual`` and
 force), ``force_demanded``, ``force_achieved``, ``moment_demanded`` and
 ``moment_achieved`` (an arrow each from the body origin: the latest
 ``wrench_cmd`` and ``wrench_achieved``). The geometry is
-:func:`tiltrov_ros.core.visual.robot_scene`'s.
+:func:`tiltrov_ros.core.visual.robot_scene`'s, its numbers from a compiled kernel
+when the kernels run (:func:`~tiltrov_ros.core.visual.robot_scene_values`); a scene
+with a number not finite is withheld and counted, as every output is.
 
 In the plant because it holds everything but the two wrenches (read raw, the
 latest of each kept as bytes and decoded only when markers are due): a
@@ -32,11 +34,14 @@ from tiltrov_ros.core.plant import PlantSample
 from tiltrov_ros.core.validation import InvalidInput, check_finite
 from tiltrov_ros.core.visual import (
     HULL_RGBA,
+    SCENE_SIZE,
     THRUSTER_RGBA,
     THRUSTER_SIZE,
     Scales,
     Scene,
-    robot_scene,
+    robot_scene_values,
+    scene_of,
+    scene_values,
 )
 
 from .base import TiltrovNode
@@ -108,47 +113,20 @@ def fill_markers(msg: MarkerArray, ns: int, scene: Scene) -> MarkerArray:
     return msg
 
 
-#: The Scene fields that change from one message to the next, in the order of their
-#: values in :func:`scene_values` (the body's size too: it is the robot's).
-_FIELDS = ('body_position', 'body_quaternion', 'body_size', 'thruster_positions',
-           'thruster_quaternions', 'thrust_actual', 'thrust_commanded', 'force_demanded',
-           'force_achieved', 'moment_demanded', 'moment_achieved')
-_SHAPES = {'body_position': (3,), 'body_quaternion': (4,), 'body_size': (3,),
-           'thruster_positions': (4, 3), 'thruster_quaternions': (4, 4),
-           'thrust_actual': (4, 2, 3), 'thrust_commanded': (4, 2, 3), 'force_demanded': (2, 3),
-           'force_achieved': (2, 3), 'moment_demanded': (2, 3), 'moment_achieved': (2, 3)}
-_COUNT = sum(int(np.prod(shape)) for shape in _SHAPES.values())
-
-
-def scene_values(scene: Scene) -> np.ndarray:
-    """Every number of ``scene`` the markers show, flat, in :data:`_FIELDS` order."""
-    return np.concatenate([np.asarray(getattr(scene, f), dtype=float).ravel()
-                           for f in _FIELDS])
-
-
-def _scene_of(values: np.ndarray) -> Scene:
-    parts, start = {}, 0
-    for f in _FIELDS:
-        n = int(np.prod(_SHAPES[f]))
-        parts[f] = values[start:start + n].reshape(_SHAPES[f])
-        start += n
-    return Scene(**parts)
-
-
 class MarkerBytes:
     """The serialized MarkerArray, rewritten in place for each scene
     (:class:`~tiltrov_ros.nodes.serialized.SerializedTemplate`: a few microseconds
     where rclpy's conversion of 17 Marker objects takes about 0.5 ms)."""
 
     def __init__(self) -> None:
-        self._template = SerializedTemplate(
+        self.template = SerializedTemplate(
             MarkerArray, lambda values, ns: fill_markers(new_marker_array(), ns,
-                                                         _scene_of(values)),
-            lambda msg: [m.header.stamp for m in msg.markers], _COUNT)
+                                                         scene_of(values)),
+            lambda msg: [m.header.stamp for m in msg.markers], SCENE_SIZE)
 
     def serialize(self, ns: int, scene: Scene) -> bytes:
         """The MarkerArray of ``scene`` stamped ``ns``, serialized."""
-        return self._template.serialize(ns, scene_values(scene))
+        return self.template.serialize(ns, scene_values(scene))
 
 
 class RobotMarkers:
@@ -180,15 +158,13 @@ class RobotMarkers:
                 commanded_tilts: Any) -> None:
         """The markers of ``sample`` and the commands in force, stamped with its time."""
         self._update_wrenches()
-        scene = robot_scene(sample.position, sample.quaternion, self.length, self.width,
-                            tilts=sample.tilts, thrusts=sample.thrusts,
-                            commanded_tilts=commanded_tilts,
-                            commanded_thrusts=commanded_thrusts,
-                            wrench_cmd=self._wrenches[WRENCH_CMD],
-                            wrench_achieved=self._wrenches[WRENCH_ACHIEVED],
-                            scales=self.scales)
+        values = robot_scene_values(
+            sample.position, sample.quaternion, self.length, self.width, tilts=sample.tilts,
+            thrusts=sample.thrusts, commanded_tilts=commanded_tilts,
+            commanded_thrusts=commanded_thrusts, wrench_cmd=self._wrenches[WRENCH_CMD],
+            wrench_achieved=self._wrenches[WRENCH_ACHIEVED], scales=self.scales)
         self._last_ns = sample.t_ns
-        self.publisher.publish(self._bytes.serialize(sample.t_ns, scene))
+        self.publisher.publish_serialized(self._bytes.template, sample.t_ns, values)
 
     def _update_wrenches(self) -> None:
         """Decode the latest wrenches; a bad one (bytes that do not decode, a value

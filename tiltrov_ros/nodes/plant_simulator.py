@@ -95,6 +95,7 @@ from .markers import RobotMarkers
 from .parameters import Overrides
 from .plant_config import declare_parameters
 from .qos import RELIABLE_QOS, STATE_QOS
+from .serialized import SerializedTemplate
 from .transforms import robot_transforms
 
 #: joint_states value of a field a joint does not have (thruster position and
@@ -112,12 +113,35 @@ MAX_CATCH_UP = 100
 MAX_PENDING = 100
 #: Marks a command that was received for a tick but rejected (held: previous stays).
 _REJECTED: list[float] = []
+#: The numbers of joint_states (position, velocity, effort of TILTS + THRUSTERS) and of
+#: odom (position, quaternion, nu) in the templates' order.
+_JOINT_VALUES = 3 * len(TILTS + THRUSTERS)
+_ODOM_VALUES = 13
+_NO_THRUSTER_VALUES = (NO_VALUE,) * len(THRUSTERS)
+
+
+def _clock_message(values: Any, ns: int) -> ClockMsg:
+    msg = ClockMsg()
+    set_stamp(msg.clock, ns)
+    return msg
+
+
+def _joint_message(values: Any, ns: int) -> JointState:
+    """joint_states of :data:`_JOINT_VALUES` values stamped ``ns``."""
+    n = len(TILTS + THRUSTERS)
+    return fill_joint_state(new_joint_state(TILTS + THRUSTERS), ns, position=values[:n],
+                            velocity=values[n:2 * n], effort=values[2 * n:])
+
+
+def _odom_message(values: Any, ns: int) -> Odometry:
+    """odom of :data:`_ODOM_VALUES` values stamped ``ns``."""
+    return fill_odometry(new_odometry(), ns, values[0:3], values[3:7], values[7:13])
 
 
 class PlantSimulator(TiltrovNode):
     """The simulated robot (see the module docstring)."""
 
-    kernel_groups = ('plant',)
+    kernel_groups = ('plant', 'visual')     # the step; robot_markers' scene
 
     def __init__(self, *, node_name: str = PLANT, namespace: str | None = None,
                  context: Any = None, cli_args: Sequence[str] | None = None,
@@ -140,9 +164,13 @@ class PlantSimulator(TiltrovNode):
                                      c.marker_scales) if c.markers_period_ns else None)
         self.transforms = robot_transforms(self, c.robot, self.plant.time_ns, tf=c.tf,
                                            thrusters=c.tf_thrusters)
-        self._odom_msg = new_odometry()
-        self._joint_msg = new_joint_state(TILTS + THRUSTERS)
-        self._clock_msg = ClockMsg()
+        # The state goes out as bytes rewritten in place (nodes/serialized.py).
+        self._clock_bytes = SerializedTemplate(ClockMsg, _clock_message,
+                                               lambda msg: [msg.clock], 0)
+        self._joint_bytes = SerializedTemplate(JointState, _joint_message,
+                                               lambda msg: [msg.header.stamp], _JOINT_VALUES)
+        self._odom_bytes = SerializedTemplate(Odometry, _odom_message,
+                                              lambda msg: [msg.header.stamp], _ODOM_VALUES)
         self._command_subs = (
             self.create_input_subscription(JointState, THRUST_CMD, self._on_thrust_cmd,
                                            RELIABLE_QOS),
@@ -190,15 +218,12 @@ class PlantSimulator(TiltrovNode):
         """``/clock``, ``joint_states``, then ``odom`` (see the module docstring)."""
         s = self.plant.sample()
         ns = s.t_ns
-        set_stamp(self._clock_msg.clock, ns)
-        self._clock_pub.publish(self._clock_msg)
-        fill_joint_state(self._joint_msg, ns,
-                         position=(*s.tilts, NO_VALUE, NO_VALUE, NO_VALUE, NO_VALUE),
-                         velocity=(*s.tilt_velocities, NO_VALUE, NO_VALUE, NO_VALUE, NO_VALUE),
-                         effort=(NO_VALUE, NO_VALUE, *s.thrusts))
-        self._joint_pub.publish(self._joint_msg)
-        self._odom_pub.publish(fill_odometry(self._odom_msg, ns, s.position, s.quaternion,
-                                             s.nu))
+        self._clock_pub.publish_serialized(self._clock_bytes, ns, ())
+        self._joint_pub.publish_serialized(
+            self._joint_bytes, ns, (*s.tilts, *_NO_THRUSTER_VALUES, *s.tilt_velocities,
+                                    *_NO_THRUSTER_VALUES, NO_VALUE, NO_VALUE, *s.thrusts))
+        self._odom_pub.publish_serialized(self._odom_bytes, ns,
+                                          (*s.position, *s.quaternion, *s.nu))
         if self.transforms is not None:
             self.transforms.publish(s)
         if self.markers is not None and self.markers.due(ns):

@@ -47,6 +47,7 @@ from .executors import main_loop
 from .guard import THROTTLE, guarded, input_callback
 from .parameters import Overrides, check, declare, declare_robot
 from .qos import CLOCK_READER_QOS, PUBLISHER_QOS
+from .serialized import SerializedTemplate
 
 #: The reference publisher's own parameters (besides the robot and wait_for_recorder).
 REFERENCE_PARAMS = ParamTable('reference_publisher', [
@@ -61,10 +62,24 @@ REFERENCE_PARAMS = ParamTable('reference_publisher', [
 HOLD_ORIGIN = ReferenceProfile(((),) * 6)
 
 
+def _setpoint_message(values: Any, ns: int) -> PoseStamped:
+    """``setpoint`` of (position (3), quaternion (w, x, y, z)) stamped ``ns``."""
+    msg = PoseStamped()
+    msg.header.frame_id = FRAME_EARTH
+    return fill_pose(msg, ns, values[:3], values[3:7])
+
+
+def _velocity_message(values: Any, ns: int) -> TwistStamped:
+    """``setpoint_velocity`` of d(eta_d)/dt (6) stamped ``ns``."""
+    msg = TwistStamped()
+    msg.header.frame_id = FRAME_EARTH
+    return fill_twist(msg, ns, values)
+
+
 class ReferencePublisher(TiltrovNode):
     """Publishes the reference at every control tick (see the module docstring)."""
 
-    reads_clock = True      # its own /clock reader rejects and counts bad samples
+    reads_clock = True      # its own /clock reader counts bad samples, sets the node's clock
 
     def __init__(self, *, node_name: str = REFERENCE, namespace: str | None = None,
                  context: Any = None, cli_args: Sequence[str] | None = None,
@@ -95,10 +110,11 @@ class ReferencePublisher(TiltrovNode):
             PoseStamped, SETPOINT, PUBLISHER_QOS,
             lambda msg: fill_pose(PoseStamped(header=msg.header), stamp_ns(msg.header.stamp),
                                   *self._last_good))
-        self._pose = PoseStamped()
-        self._pose.header.frame_id = FRAME_EARTH
-        self._twist = TwistStamped()
-        self._twist.header.frame_id = FRAME_EARTH
+        # Both go out as serialized templates rewritten in place (nodes/serialized.py).
+        self._pose_bytes = SerializedTemplate(PoseStamped, _setpoint_message,
+                                              lambda msg: [msg.header.stamp], 7)
+        self._twist_bytes = SerializedTemplate(TwistStamped, _velocity_message,
+                                               lambda msg: [msg.header.stamp], 6)
         self._last_tick: int | None = None
         self.published = 0
         self.skipped = 0
@@ -123,15 +139,16 @@ class ReferencePublisher(TiltrovNode):
     def publish_tick(self, stamp: int, t: float) -> None:
         """Publish the reference at scenario time ``t`` (s) stamped ``stamp`` (ns)."""
         ref = self.profile.at(t)
-        self._velocity_pub.publish(fill_twist(self._twist, stamp, ref.velocity))
-        if self._setpoint_pub.publish(fill_pose(self._pose, stamp, ref.position,
-                                                ref.quaternion)):
+        self._velocity_pub.publish_serialized(self._twist_bytes, stamp, ref.velocity)
+        if self._setpoint_pub.publish_serialized(self._pose_bytes, stamp,
+                                                 (*ref.position, *ref.quaternion)):
             self._last_good = (tuple(ref.position), tuple(ref.quaternion))
         self.published += 1
 
     @input_callback(CLOCK)
     def _on_clock(self, msg: ClockMsg) -> None:
         ns = checked_stamp_ns(msg.clock.sec, msg.clock.nanosec)
+        self.time_source.clock_callback(msg)    # the node's clock: it has no reader of its own
         last = self._last_tick
         if last is not None and ns < last:
             self.restarts += 1

@@ -19,7 +19,11 @@ nodes check every input (``core/validation.py``):
 
 :func:`install` replaces a node's time source by this one (same subscription,
 same clocks); :class:`~tiltrov_ros.nodes.base.TiltrovNode` does it for every
-node of the package.
+node of the package. A node that reads ``/clock`` itself (``reads_clock``: the
+reference publisher) hands each valid sample to :meth:`CheckedTimeSource.clock_callback`
+from its own reader, and the time source subscribes to nothing: each sample is
+taken once per node. Samples are decoded by a
+:class:`~tiltrov_ros.nodes.serialized.MessageReader` (no message object per sample).
 """
 
 from __future__ import annotations
@@ -27,13 +31,14 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from rclpy.serialization import deserialize_message
 from rclpy.time_source import TimeSource
 from rosgraph_msgs.msg import Clock as ClockMsg
 
 from tiltrov_ros.core.names import CLOCK
 from tiltrov_ros.core.timebase import format_ns
 from tiltrov_ros.core.validation import InvalidInput, checked_stamp_ns
+
+from .serialized import MessageReader
 
 if TYPE_CHECKING:
     from .base import TiltrovNode
@@ -49,14 +54,17 @@ class CheckedTimeSource(TimeSource):
         self._owner = node
         self.last_ns: int | None = None
         self.jumps_back = 0
+        self._reader = MessageReader(ClockMsg)
         super().__init__(node=node)
 
     def _subscribe_to_clock_topic(self) -> None:
         """rclpy's subscription (same topic and QoS: the latest sample, best effort), but
         raw: the node decodes each sample (:meth:`TiltrovNode.decode`), so bytes that
-        do not decode are rejected and counted instead of dropped unseen."""
+        do not decode are rejected and counted instead of dropped unseen. None for a
+        node that reads /clock itself (``reads_clock``): its reader hands each valid
+        sample to :meth:`clock_callback`, so each sample is taken once."""
         node = self._get_node()
-        if self._clock_sub is None and node is not None:
+        if self._clock_sub is None and node is not None and not self._owner.reads_clock:
             self._clock_sub = node.create_subscription(
                 ClockMsg, CLOCK, self._on_clock_bytes,
                 QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT), raw=True)
@@ -64,7 +72,7 @@ class CheckedTimeSource(TimeSource):
     def _on_clock_bytes(self, data: bytes) -> None:
         node = self._owner
         try:
-            msg = deserialize_message(data, ClockMsg)
+            msg = self._reader.read(data)
         except Exception:   # rclpy's RMWError: not a Clock
             if not node.reads_clock:       # else the node's own /clock reader counts it
                 node.reject_malformed(CLOCK, ClockMsg, data)

@@ -77,10 +77,12 @@ from .conversions import (
     fill_joint_state,
     fill_wrench,
     joint_state_values,
+    joint_template,
     new_joint_state,
     new_wrench,
     stamp_ns,
     wrench_array,
+    wrench_template,
 )
 from .executors import main_loop
 from .guard import THROTTLE, guarded, input_callback
@@ -151,6 +153,10 @@ class ThrustAllocatorNode(TiltRequests, TiltrovNode):
         self._thrust_pub = self.create_safe_publisher(
             JointState, THRUST_CMD, PUBLISHER_QOS,
             lambda msg: self._safe_msgs(stamp_ns(msg.header.stamp))[2])
+        # The answers go out as serialized templates (nodes/serialized.py).
+        self._achieved_pub.serialize_as(*wrench_template())
+        self._tilt_pub.serialize_as(*joint_template(TILTS, 'position'))
+        self._thrust_pub.serialize_as(*joint_template(THRUSTERS, 'effort'))
         self.create_input_subscription(WrenchStamped, WRENCH_CMD, self._on_wrench, RELIABLE_QOS)
         if self.tilt_request_mode != 'ignored':
             self.create_input_subscription(JointState, TILT_REQUEST, self._on_tilt_request,

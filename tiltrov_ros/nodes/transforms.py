@@ -15,7 +15,7 @@ siblings hung off them, as MAVROS does::
 * with ``tf_thrusters`` (where robot_state_publisher is absent, the venv): the
   thruster links at the actual tilts in the same ``/tf`` message, as
   robot_state_publisher computes them from the URDF and ``joint_states``
-  (:func:`~tiltrov_ros.core.robot_description.link_quaternions`), and the URDF on
+  (:func:`~tiltrov_ros.core.robot_description.link_quaternion_values`), and the URDF on
   ``robot_description`` (transient local), so a viewer or a bag shows the
   thrusters tilt.
 
@@ -30,13 +30,14 @@ plant says so once (:data:`TFMessage` is None).
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 from geometry_msgs.msg import TransformStamped
 import numpy as np
 from std_msgs.msg import String
 
-from tiltrov_ros.core.frames import BODY_RELATION, EARTH_RELATION, pose_ned_to_enu
+from tiltrov_ros.core.frames import BODY_RELATION, EARTH_RELATION, pose_ned_to_enu_values
 from tiltrov_ros.core.names import (
     FRAME_BODY,
     FRAME_BODY_FLU,
@@ -48,7 +49,7 @@ from tiltrov_ros.core.names import (
 )
 from tiltrov_ros.core.params import RobotParams
 from tiltrov_ros.core.plant import PlantSample
-from tiltrov_ros.core.robot_description import link_quaternions, robot_urdf, tilt_joints
+from tiltrov_ros.core.robot_description import link_quaternion_values, robot_urdf, tilt_joints
 
 from .base import TiltrovNode
 from .conversions import set_stamp
@@ -101,11 +102,10 @@ class RobotTransforms:
         if thrusters:
             self.description = node.create_publisher(String, ROBOT_DESCRIPTION, LATCHED_QOS)
             self.description.publish(String(data=robot_urdf(robot)))
-        self._values = np.zeros(_POSE + 4 * len(self._joints))
-        self._links = self._values[_POSE:].reshape(-1, 4)     # a view: refilled in place
+        self._links: list[float] = []         # the thruster links' quaternions, flat
         self._tilts: tuple[float, ...] = ()
         self._template = SerializedTemplate(TFMessage, self._message, self._stamps,
-                                            len(self._values))
+                                            _POSE + 4 * len(self._joints))
 
     def _message(self, values: np.ndarray, ns: int) -> Any:
         """The /tf message of ``values`` (:data:`_POSE`), stamped ``ns``: the template's
@@ -124,22 +124,22 @@ class RobotTransforms:
     def publish(self, sample: PlantSample) -> None:
         """The tree at ``sample`` (its stamp); nothing for a state not finite (its odom
         is withheld too)."""
-        if self.update(sample):
-            self.publisher.publish(self._template.serialize(sample.t_ns, self._values))
+        values = self.values(sample)
+        if values is not None:
+            self.publisher.publish(self._template.serialize(sample.t_ns, values))
 
-    def update(self, sample: PlantSample) -> bool:
-        """The template's values at ``sample``; False if they are not all finite."""
-        values = self._values
+    def values(self, sample: PlantSample) -> list[float] | None:
+        """The template's values at ``sample`` (plain floats); None if they are not all
+        finite."""
         try:
-            p, q = pose_ned_to_enu(sample.position, sample.quaternion)
+            pose = pose_ned_to_enu_values(sample.position, sample.quaternion)
         except ValueError:      # a quaternion not finite: a diverged state
-            return False
-        values[0:3] = p
-        values[3:_POSE] = q
+            return None
         if self._joints and sample.tilts != self._tilts:
             self._tilts = sample.tilts
-            link_quaternions(self._joints, *sample.tilts, out=self._links)
-        return bool(np.isfinite(values).all())
+            self._links = link_quaternion_values(self._joints, *sample.tilts)
+        values = [*pose, *self._links]
+        return values if all(map(math.isfinite, values)) else None
 
 
 def robot_transforms(node: TiltrovNode, robot: RobotParams, ns: int, *, tf: bool,

@@ -81,12 +81,14 @@ from .conversions import (
     FloatArray,
     fill_joint_state,
     fill_wrench,
+    joint_template,
     new_joint_state,
     new_wrench,
     odometry_arrays,
     pose_arrays,
     stamp_ns,
     twist_array,
+    wrench_template,
 )
 from .executors import main_loop
 from .guard import THROTTLE, guarded, input_callback
@@ -165,6 +167,10 @@ class WrenchController(AchievedInput, TiltrovNode):
             lambda msg: fill_joint_state(new_joint_state(TILTS), stamp_ns(msg.header.stamp),
                                          position=self._safe_tilts))
             if self.kind == 'switching' else None)
+        # The answers go out as serialized templates (nodes/serialized.py).
+        self._wrench_pub.serialize_as(*wrench_template())
+        if self._tilt_pub is not None:
+            self._tilt_pub.serialize_as(*joint_template(TILTS, 'position'))
         # Raw: only the odometry at control ticks (1 in control_period / step_size) is
         # deserialized (bytes that do not decode are rejected: malformed); the stamp of
         # the others is read from the CDR header.
