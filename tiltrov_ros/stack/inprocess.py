@@ -8,6 +8,7 @@ from collections.abc import Sequence
 import importlib
 import os
 from pathlib import Path
+import signal
 import threading
 import time
 from typing import Any
@@ -59,13 +60,25 @@ def run_single_process(specs: Sequence[NodeSpec], namespace: str, out: Output,
     thread: it takes queued messages itself inside its callbacks, which the
     EventsExecutor (one take per event) does not allow, and it stays off the
     stack's critical path.
+
+    SIGINT and SIGTERM set a flag the spin looks at between slices, as each
+    node's own process does (``nodes.executors.main_loop``); the handlers are
+    installed after the executor, whose constructor takes the signals for
+    itself. Python's default KeyboardInterrupt was raised wherever the main
+    thread happened to be, and a Ctrl-C was lost now and then (1 stop in 6 of
+    a realtime run: the process ran on for a minute).
     """
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
 
-    from tiltrov_ros.nodes.executors import STARTUP_ERRORS, make_executor, spin_until
+    from tiltrov_ros.nodes.executors import (
+        STARTUP_ERRORS,
+        STOP_POLL,
+        make_executor,
+        spin_until,
+    )
 
     context = Context()
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
@@ -76,6 +89,16 @@ def run_single_process(specs: Sequence[NodeSpec], namespace: str, out: Output,
     started = time.monotonic()
     status = StatusFile(status_file)
     code = EXIT_FAILED
+    stop = threading.Event()
+
+    def on_signal(signum: int, frame: object) -> None:
+        stop.set()
+
+    # Signal handlers belong to the main thread (a caller in another thread stops the
+    # run by its own means).
+    main = threading.current_thread() is threading.main_thread()
+    previous = ({sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+                if main else {})
     try:
         try:
             nodes = build_nodes(specs, context, namespace)
@@ -85,6 +108,8 @@ def run_single_process(specs: Sequence[NodeSpec], namespace: str, out: Output,
         by_name = {s.name: n for n, s in zip(nodes, specs)}
         plant = by_name[PLANT]
         executor = make_executor(context, executor_kind)
+        for sig in previous:
+            signal.signal(sig, on_signal)
         for name, node in by_name.items():
             if name != RECORDER:
                 executor.add_node(node)
@@ -95,11 +120,11 @@ def run_single_process(specs: Sequence[NodeSpec], namespace: str, out: Output,
             side_thread.start()
         status.write('running', {s.name: {'pid': os.getpid(), 'starts': 1, 'running': True}
                                  for s in specs})
-        try:
-            spin_until(executor, context, plant.finished)
+        spin_until(executor, context, plant.finished, step=STOP_POLL, stop=stop)
+        if plant.finished.done():
             out.line('launch', f'{summary} done in {time.monotonic() - started:.2f} s wall')
             code = EXIT_OK
-        except KeyboardInterrupt:
+        else:
             out.line('launch', 'SIGINT: stopping every node')
             code = EXIT_INTERRUPTED
     finally:
@@ -125,4 +150,6 @@ def run_single_process(specs: Sequence[NodeSpec], namespace: str, out: Output,
             code = EXIT_FAILED
         status.write('ended', {s.name: {'pid': os.getpid(), 'starts': 1, 'running': False}
                                for s in specs}, code)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
     return code
