@@ -237,3 +237,25 @@ def test_a_publisher_serializing_as_a_template_sends_what_rclpy_would(ros) -> No
     assert probe[topic][:2] == [plain, marked]
     assert probe.stamps(topic) == [5, 6, 77] and list(probe[topic][2].effort) == [0.0] * 4
     assert node.unsafe == {topic: 1} and pub.published == 3
+
+
+@pytest.mark.parametrize('names_field', [(names.TILTS, 'position'),
+                                         (names.THRUSTERS, 'effort')],
+                         ids=['tilt_cmd', 'thrust_cmd'])
+def test_joint_templates_are_the_bytes_a_writer_sends(names_field: Any) -> None:
+    """rclpy's serialize_message gives a JointState with empty velocity and effort 8
+    bytes longer than the message: the template is cut to it, padded to 4 bytes as a
+    writer pads it, so that rosbags (which refuses more than 3 bytes past the end)
+    reads what the stack recorded."""
+    from rosbags.typesys import Stores, get_typestore
+
+    from tiltrov_ros.nodes.conversions import joint_template
+    joints, field = names_field
+    template, _ = joint_template(joints, field)
+    values = np.linspace(-1.0, 1.0, len(joints))
+    data = template.serialize(123_456_789, values)
+    assert len(data) % 4 == 0
+    assert len(data) < len(serialize_message(template.message(values, 123_456_789)))
+    decoded = get_typestore(Stores.ROS2_JAZZY).deserialize_cdr(data, 'sensor_msgs/msg/JointState')
+    assert list(getattr(decoded, field)) == list(values) and list(decoded.name) == list(joints)
+    assert deserialize_message(data, JointState) == template.message(values, 123_456_789)

@@ -14,7 +14,11 @@ Both ways here go through the serialized bytes instead:
   rclpy leaves the CDR padding bytes as it finds them, so a sentinel could also
   show up in padding: offsets are kept only when each sentinel occurs once and a
   check message decodes to the one the fill function makes (else other
-  sentinels are tried).
+  sentinels are tried). ``serialize_message`` may return more bytes than the
+  message takes (Fast DDS gives the size it estimated: a ``JointState`` with an
+  empty ``velocity`` and ``effort`` came 8 bytes long, which rosbags and the
+  bag readers refuse); the template is cut to the message, padded to 4 bytes as
+  a writer pads it.
 * :class:`MessageReader` (in): the first message of a topic is deserialized
   and its layout walked (bag/cdr.py: where each number is, which bytes fix the
   layout: strings, sequence lengths); a later message of the same size with the
@@ -72,7 +76,7 @@ class SerializedTemplate:
         stamps = self._stamps(msg)
         for i, stamp in enumerate(stamps):
             stamp.sec, stamp.nanosec = sec + i, nanosec + i
-        template = serialize_message(msg)
+        template = _trimmed(serialize_message(msg), msg, self.msg_type)
         n = len(stamps)
         doubles = self._offsets(template, [struct.pack('<d', v) for v in sentinels])
         secs = self._offsets(template, [struct.pack('<i', sec + i) for i in range(n)])
@@ -119,6 +123,21 @@ class SerializedTemplate:
         for offset in self._stamp_at:
             _STAMP.pack_into(buf, offset, sec, nanosec)
         return bytes(buf)
+
+
+def _trimmed(blob: bytes, msg: Any, msg_type: type) -> bytes:
+    """``blob`` (``msg`` serialized) without the bytes past the message's end, padded
+    with zeros to a multiple of 4 (the payload a writer sends)."""
+    end = len(blob)
+    while end > 4:
+        try:
+            if deserialize_message(blob[:end - 1], msg_type) != msg:
+                break
+        except Exception:       # rclpy's RMWError: cut before the message's end
+            break
+        end -= 1
+    padded = -(-end // 4) * 4
+    return blob[:end] + bytes(padded - end)
 
 
 def _runs(offsets: list[int]) -> tuple[tuple[struct.Struct, int, int, int], ...]:
