@@ -87,7 +87,8 @@ class ControllerLike(Protocol):
     def update(self, t: float, position: FloatArray, quaternion: FloatArray, nu: FloatArray,
                reference: Any, /, achieved: FloatArray | None = None) -> ControlOutputLike:
         """The wrench for the state at time t (s) and the reference at t; ``achieved``:
-        what the allocator achieved of the previous wrench (None: unknown)."""
+        what the allocator achieved of the previous wrench, passed only to a controller
+        whose ``uses_achieved`` is true (the others are called without it)."""
 
 
 class AllocationResultLike(Protocol):
@@ -212,9 +213,13 @@ def run(plant: Plant, controller: ControllerLike, allocator: AllocatorLike,
             reference = Reference(_vector(p, 3, 'reference position'),
                                   _vector(q, 4, 'reference quaternion'),
                                   _vector(v, 6, 'reference velocity'))
+            # The achieved wrench only to a controller that reads it (the pid with its
+            # anti-windup on): a controller of the plain protocol is called as ever.
+            extra = ({'achieved': np.asarray(previous.achieved, dtype=float)}
+                     if previous is not None and getattr(controller, 'uses_achieved', False)
+                     else {})
             out = controller.update(t, plant.position, plant.quaternion, plant.nu, reference,
-                                    achieved=None if previous is None
-                                    else np.asarray(previous.achieved, dtype=float))
+                                    **extra)
             wrench = _vector(out.wrench, 6, 'controller wrench')
             request = out.tilt_request
             if request is None:
