@@ -326,7 +326,11 @@ class LaunchProcess:
         return self.pids()
 
     def finish(self, timeout: float) -> int:
-        code = self.process.wait(timeout=timeout)
+        try:
+            code = self.process.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            raise AssertionError(f'tiltrov launch still running after {timeout} s:\n'
+                                 + self.output) from None
         self._reader.join(timeout=5)
         return code
 
