@@ -22,8 +22,7 @@ def test_join_namespace_keeps_absolute_names() -> None:
 def test_every_topic_has_a_type_and_the_joints_are_the_contract() -> None:
     topics = [names.ODOM, names.JOINT_STATES, names.SETPOINT, names.SETPOINT_VELOCITY,
               names.WRENCH_CMD, names.TILT_REQUEST, names.THRUST_CMD, names.TILT_CMD,
-              names.WRENCH_ACHIEVED, names.WRENCH_INTEGRAL, names.CLOCK, names.DIAGNOSTICS,
-              names.ROBOT_MARKERS]
+              names.WRENCH_ACHIEVED, names.CLOCK, names.DIAGNOSTICS, names.ROBOT_MARKERS]
     assert sorted(names.STACK_TOPICS) == sorted(topics)
     assert all(t.count('/') == 2 for t in names.STACK_TOPICS.values())
     assert names.THRUSTERS == tuple(f'thruster_{i}' for i in range(1, 5))
