@@ -49,7 +49,9 @@ def _messages(bag: Path, topic: str, msg_type: Any) -> list[Any]:
 def test_the_bag_has_the_namespaced_tree_with_rosbag2s_qos(bag: Path) -> None:
     topics = bag_info(bag).topics
     assert topics['/r1/tf'].msgtype == 'tf2_msgs/msg/TFMessage'
-    assert topics['/r1/tf'].count == round(DURATION * 100) + 1
+    # One /tf per odometry (a stall's republished state has both again; the tree read
+    # from the bag has every step, below).
+    assert topics['/r1/tf'].count == topics['/r1/odom'].count >= round(DURATION * 100) + 1
     static = topics['/r1/tf_static']
     assert static.count == 1
     assert [q.durability for q in static.qos] == [QosDurability.TRANSIENT_LOCAL]

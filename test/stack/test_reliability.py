@@ -590,9 +590,9 @@ def _loss_report(bag: Path, output: str, info: str) -> list[str]:
 @pytest.mark.slow
 def test_a_recorder_that_falls_behind_fails_the_launch_and_bag_info_says_what_was_lost(
         ros: Any, tmp_path: Path) -> None:
-    """The recorder stopped (SIGSTOP) for 40 s of a realtime run at x5: more samples go
-    by than the writers keep for a reader that does not acknowledge (1000) and than a
-    transport buffers for it (the plant alone sends some 150 kB per second of sim; a
+    """The recorder stopped (SIGSTOP) for 135 s of a realtime run at x10: more samples
+    go by than the writers keep for a reader that does not acknowledge (10000 steps of
+    the plant's state, 1000 ticks) and than a transport buffers for it (the plant alone sends some 150 kB per second of sim; a
     socket here buffers at most 4 MB), so the recording loses them for real, as an
     overloaded recorder does. The launch exits 1 saying what was lost, and ``tiltrov
     bag info`` says the same (before: exit code 0; an unrelated flood of 147 000 msg/s
@@ -602,8 +602,8 @@ def test_a_recorder_that_falls_behind_fails_the_launch_and_bag_info_says_what_wa
     varied from run to run: it is checked against the bag's own evidence."""
     bag = tmp_path / 'bag'
     code, output = _recorder_stopped(
-        ros, tmp_path, bag, ('--realtime', '--real-time-factor', '5', '--duration', '60'),
-        5, lambda sim, _: sim.reached(45), timeout=60.0)
+        ros, tmp_path, bag, ('--realtime', '--real-time-factor', '10', '--duration', '150'),
+        5, lambda sim, _: sim.reached(140), timeout=60.0)
     assert code == 1, output
     assert _loss_report(bag, output, _bag_info(bag))
     assert 'Traceback' not in output
