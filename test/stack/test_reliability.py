@@ -594,9 +594,10 @@ def test_a_recorder_that_falls_behind_fails_the_launch_and_bag_info_says_what_wa
     go by than the writers keep for a reader that does not acknowledge (10000 steps of
     the plant's state, 1000 ticks) and than a transport buffers for it (the plant alone
     sends some 150 kB per second of sim; a socket here buffers at most 4 MB), so the
-    recording loses them for real, as an overloaded recorder does. The launch exits 1 saying what was lost, and ``tiltrov
-    bag info`` says the same (before: exit code 0; an unrelated flood of 147 000 msg/s
-    made the recorder lose 1 874 odom and the launch exited 0 too). What the report
+    recording loses them for real, as an overloaded recorder does. The launch exits 1
+    saying what was lost, and ``tiltrov bag info`` says the same (before: exit code 0;
+    an unrelated flood of 147 000 msg/s made the recorder lose 1 874 odom and the
+    launch exited 0 too). What the report
     holds (topics short, nodes whose final counts never came, samples DDS reported
     lost) depends on what the transport delivered once the recorder resumed, and
     varied from run to run: it is checked against the bag's own evidence."""
