@@ -55,7 +55,6 @@ from typing import Any
 
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.duration import Duration
 from rclpy.parameter import Parameter
 from rclpy.task import Future
 from rosgraph_msgs.msg import Clock as ClockMsg
@@ -112,10 +111,6 @@ MAX_CATCH_UP = 100
 #: lockstep: most ticks with commands held before their time (only the present one is
 #: legitimate; the cap keeps a misbehaving publisher from growing the table).
 MAX_PENDING = 100
-#: ns of sim time between two lockstep pacing waits (:meth:`PlantSimulator._pace`).
-PACE_NS = 1_000_000_000
-#: ns (wall): the longest a pacing wait lasts.
-PACE_WAIT_NS = 500_000_000
 #: Marks a command that was received for a tick but rejected (held: previous stays).
 _REJECTED: list[float] = []
 #: The numbers of joint_states (position, velocity, effort of TILTS + THRUSTERS) and of
@@ -201,9 +196,6 @@ class PlantSimulator(TiltrovNode):
         self.startup_retries = 0
         self.republished = 0
         self.overruns = 0
-        #: Lockstep: pacing waits that ran out (a reader of the state stopped or gone).
-        self.reader_timeouts = 0
-        self._paced_at = 0
         self._diag_mark = (self.steady_ns(), self.plant.time_ns)
         self._rtf_achieved = 0.0
 
@@ -347,24 +339,7 @@ class PlantSimulator(TiltrovNode):
                     del self._pending[stamp]
                 self._waiting_since = None
                 self._stalled = False
-                if t - self._paced_at >= PACE_NS:
-                    self._paced_at = t
-                    self._pace()
             self._step()
-
-    def _pace(self) -> None:
-        """Lockstep: let the readers of the state catch up (at most :data:`PACE_WAIT`).
-
-        Lockstep runs as fast as the loop answers, ten to twenty times real time,
-        faster than a recorder on a loaded machine writes; its lag then grew past
-        what the writers keep (1000 ticks) and past the transport's buffers, and a
-        recorded run lost ticks (and, with a node killed, that node's samples in
-        flight). Once per second of sim time the plant waits until every reader
-        acknowledged its odometry: a recorder that keeps up costs nothing, one that
-        is behind slows the run to its pace, one that is stopped costs
-        :data:`PACE_WAIT_NS` per second of sim time (counted: ``reader_timeouts``)."""
-        if not self._odom_pub.publisher.wait_for_all_acked(Duration(nanoseconds=PACE_WAIT_NS)):
-            self.reader_timeouts += 1
 
     def _step(self) -> None:
         """One plant step (the scenario's faults applied first), then the state out."""
@@ -557,7 +532,6 @@ class PlantSimulator(TiltrovNode):
             'real_time_factor_achieved': self._rtf_achieved,
             'stalls': self.stalls, 'startup_retries': self.startup_retries,
             'republished_states': self.republished, 'overruns': self.overruns,
-            'reader_timeouts': self.reader_timeouts,
             'rejected_thrust_commands': plant.thrusters.rejected,
             'rejected_tilt_commands': plant.servos.rejected,
             'finished': self.finished.done(),
