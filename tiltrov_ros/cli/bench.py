@@ -62,7 +62,13 @@ def run(args: argparse.Namespace) -> int:
     results: dict[str, Any] = {}
     for name in args.names or list(benches):
         print(f'== {name}', flush=True)
-        results[name] = _load(benches[name]).main()
+        # A benchmark's main() parses the command line it sees: its own defaults here,
+        # not ``tiltrov bench NAME`` (make bench failed with "unrecognized arguments").
+        saved, sys.argv = sys.argv, [str(benches[name])]
+        try:
+            results[name] = _load(benches[name]).main()
+        finally:
+            sys.argv = saved
         print(flush=True)
     if args.json:
         args.json.write_text(json.dumps(results, indent=2, default=float) + '\n')
