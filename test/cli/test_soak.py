@@ -27,8 +27,10 @@ def test_short_soak_reports_memory_counts_and_stalls(tmp_path: Path) -> None:
                                   'thrust_allocator', 'reference_publisher'}
     assert all(row['start_kib'] > 0 and row['end_kib'] > 0 for row in report['rss'].values())
     counts = report['messages']
-    assert counts['/odom'] == {'published': 201, 'recorded': 201}
-    assert counts['/thrust_cmd'] == {'published': 40, 'recorded': 40}
+    # One state per step (201), once more at most for a reader matched after the
+    # initial state (a start-up retry; no stall, above), and the answers to it.
+    assert counts['/odom']['published'] in (201, 202), counts['/odom']
+    assert counts['/thrust_cmd']['published'] in (40, 41), counts['/thrust_cmd']
     assert all(c['published'] == c['recorded'] for c in counts.values())
     assert report['lost'] == {}
     assert 'published' in result.stdout and 'RSS' in result.stdout
