@@ -17,6 +17,7 @@ from rclpy.qos import QoSProfile
 from rclpy.serialization import serialize_message
 from ros_stack import installed
 from rosgraph_msgs.msg import Clock
+from scipy.stats import theilslopes
 from stack_messages import STACK, canonical
 
 from tiltrov_ros.bag.replay import Player, ReplayOptions, parse_remaps
@@ -98,18 +99,21 @@ def test_replay_publishes_the_bytes_on_the_scaled_schedule(ros: Any, tmp_path: P
     for topic in ('/odom', '/wrench_cmd'):
         assert [d for _, d in listener.got[topic]] == [d for _, d in recorded[topic]]
     # Timing: DDS reception times against log times / rate. A constant latency
-    # (e.g. the first sample's) does not matter; the spacing does.
+    # (e.g. the first sample's) does not matter; the spacing does. A loaded machine
+    # delays a few samples (the player then catches up with its schedule), so the
+    # slope is Theil-Sen's (the median of the pairwise slopes) and the residuals are
+    # judged by their median and 90th percentile, not by the single worst sample.
     log = np.array([t for topic in ('/odom', '/wrench_cmd') for t, _ in recorded[topic]])
     wall = np.array([t for topic in ('/odom', '/wrench_cmd') for t, _ in listener.got[topic]])
     expected = (log - log.min()) / 1e9 / 2   # s, at rate 2: 0.6 s in all
     actual = (wall - wall.min()) / 1e9
-    slope = np.polyfit(expected, actual, 1)[0]
+    slope = theilslopes(actual, expected)[0]
     assert slope == pytest.approx(1.0, abs=0.05)  # 1.33 at rate 1.5, 2 at rate 1
     residual = actual - expected
     residual -= np.median(residual)
-    # generous for a loaded 2-core machine, small against the 25 ms spacing
+    # small against the 25 ms spacing
     assert np.median(np.abs(residual)) < 0.005, residual
-    assert np.abs(residual).max() < 0.050, residual
+    assert np.percentile(np.abs(residual), 90) < 0.020, residual
 
 
 def run_player(ros: Any, bag: Path, options: ReplayOptions,

@@ -180,10 +180,19 @@ def test_a_killed_node_is_respawned_and_the_loop_resumes(ros: Any, tmp_path: Pat
     ticks = set(range(0, int(duration * 1000), 50))
     for topic in ('/odom', '/joint_states', '/clock'):
         assert stamps[topic] == steps, topic
-    # The new allocator holds its answers until the recorder reads its topics
-    # (wait_for_recorder): every tick is recorded on every topic, the killed
-    # allocator's own included.
+    # The new process holds its answers until the recorder reads its topics
+    # (wait_for_recorder): every tick is recorded on every topic, the restarted node's
+    # included. Only the killed process's last answers may be missing from the bag:
+    # the downstream node got them (the plant stepped past them), but a sample the
+    # recorder's full socket dropped is repaired by its writer, which kill -9 took.
+    # They are the ticks just before the stall (within 1 s of sim time).
+    own = {'thrust_allocator': ('/thrust_cmd', '/tilt_cmd', '/wrench_achieved'),
+           'wrench_controller': ('/wrench_cmd',)}[victim]
+    stall_ms = round(stalls[0] * 1000)
     for topic in ('/setpoint', '/setpoint_velocity', '/wrench_cmd', '/thrust_cmd',
                   '/tilt_cmd', '/wrench_achieved'):
-        assert stamps[topic] >= ticks, (topic, sorted(ticks - stamps[topic])[:10])
+        missing = ticks - stamps[topic]
+        if topic in own:
+            missing = {t for t in missing if not stall_ms - 1000 <= t < stall_ms}
+        assert not missing, (topic, stall_ms, sorted(missing)[:10])
     assert 'bag_recorder reads every topic of this node' in out
