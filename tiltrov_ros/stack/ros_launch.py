@@ -20,7 +20,8 @@ The run ends as ``tiltrov launch`` ends it: when the plant reaches
 ``duration`` it exits (code 0), the other nodes are stopped (SIGINT), then the
 recorder, which closes its bag; then the launch ends with code 0. A node that
 exits otherwise (an error, a crash) ends the launch with code 1 and a line
-naming it. Ctrl-C stops every node cleanly (exit code 0 each).
+naming it. Ctrl-C stops every node cleanly (exit code 0 each); a node gets
+13 s from SIGINT before SIGTERM, the recorder 20 s, as with ``tiltrov launch``.
 
 Imported only by the launch file: ``launch`` and ``launch_ros`` come with ROS
 (or the ros2 command line), not with this package's requirements.
@@ -60,7 +61,7 @@ from tiltrov_ros.core.runner import StackConfig
 from tiltrov_ros.core.timebase import NS_PER_S
 
 from .specs import LaunchError, LaunchOptions, NodeSpec, namespaced_config, stack_specs
-from .supervisor import RECORDER_STOP_TIMEOUT
+from .supervisor import RECORDER_STOP_TIMEOUT, STOP_TIMEOUTS
 
 PACKAGE = 'tiltrov_ros'
 #: The package (and executable) that publishes a URDF's links from joint_states.
@@ -139,7 +140,11 @@ def _stack(context: LaunchContext) -> list[Any]:
 
 
 def _node(spec: NodeSpec, namespace: str) -> Node:
-    extra = {'sigterm_timeout': str(RECORDER_STOP_TIMEOUT)} if spec.name == RECORDER else {}
+    # A stopping node waits up to DELIVERY_WAIT for its readers' acknowledgements:
+    # launch's default 5 s before SIGTERM cut a loaded reference publisher short (the
+    # launch then failed); tiltrov launch's 13 s, the recorder's 20 s.
+    extra = {'sigterm_timeout': str(
+        RECORDER_STOP_TIMEOUT if spec.name == RECORDER else STOP_TIMEOUTS[0])}
     return Node(package=PACKAGE, executable=spec.name, name=spec.name,
                 namespace=namespace or None, output='screen',
                 parameters=[*(str(path) for path in spec.params_files), spec.all_overrides()],
