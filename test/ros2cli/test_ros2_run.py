@@ -135,13 +135,29 @@ def test_ros2_run_every_node_as_documented(ros: Any, ros2: Ros2, tmp_path: Path)
     assert echoed.returncode == 0 and 'hardware_id: tiltrov' in echoed.stdout, echoed
 
     # Ctrl-C in each node's terminal: exit code 0, no traceback; the recorder's bag.
-    for node, proc in procs.items():
-        assert ctrl_c(proc, timeout=30) == 0, node
+    # The documented stack runs lockstep unpaced (nothing waits for the recorder, as
+    # tiltrov launch --record does), so a recorder on a loaded machine can fall behind a
+    # writer's history: DDS then reports samples lost (16 wrench_achieved once, with a
+    # second suite worker on the machine). That is no failure of ros2 run, but it must be
+    # said: exit code 1, the loss on stderr and in the bag, and nothing else lost.
+    from tiltrov_ros.bag.bagfile import bag_info
+    from tiltrov_ros.bag.losses import losses
+    codes = {node: ctrl_c(proc, timeout=30) for node, proc in procs.items()}
+    bag = tmp_path / 'runs' / 'x'
+    lost = losses(bag)
+    recorder_log = (tmp_path / 'bag_recorder.log').read_text()
+    if codes['bag_recorder'] == 1:
+        dropped = lost.recorder.get('lost_in_dds')
+        assert dropped and not lost.recorder.get('write_errors'), (lost.recorder, recorder_log)
+        assert f'DDS lost: {dropped}' in recorder_log, recorder_log
+        codes['bag_recorder'] = 0
+    else:
+        assert not lost, lost.lines()
+    assert codes == {node: 0 for node in procs}, codes
     for node in procs:
         log = (tmp_path / f'{node}.log').read_text()
         assert 'Traceback' not in log, log
-    from tiltrov_ros.bag.bagfile import bag_info
-    assert bag_info(str(tmp_path / 'runs' / 'x')).message_count > 0
+    assert bag_info(str(bag)).message_count > 0
 
 
 def _documented_console(path: Path) -> list[tuple[list[str], str]]:
