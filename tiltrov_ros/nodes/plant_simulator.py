@@ -21,7 +21,8 @@ Modes (parameter ``mode``):
   tick), exactly as :func:`tiltrov_ros.core.runner.run` does. Before the
   initial state it waits until ``startup_subscribers`` readers are matched on
   ``odom`` and a publisher on each command topic, then ``startup_delay``
-  wall seconds more. If the commands of a tick
+  wall seconds more, and until the readers of the state have not changed for
+  ``RECORDER_SETTLE`` (0.5 s). If the commands of a tick
   have not come after ``stall_timeout`` wall seconds, the wait is reported on
   ``/diagnostics`` as a stall and the state at t_i (joint_states, odom, clock)
   is published again, so a lost message or a restarted controller resumes the
@@ -80,7 +81,7 @@ from tiltrov_ros.core.validation import (
     failed_thruster_indices,
 )
 
-from .base import OK, RECORDER_WAIT, WARN, TiltrovNode
+from .base import OK, RECORDER_SETTLE, RECORDER_WAIT, WARN, TiltrovNode
 from .conversions import (
     fill_joint_state,
     fill_odometry,
@@ -178,6 +179,8 @@ class PlantSimulator(TiltrovNode):
                                            RELIABLE_QOS))
         #: readers matched on odom, joint_states, /clock when the initial state went out
         self._initial_readers: tuple[int, ...] = ()
+        self._settled_readers: tuple[int, ...] = ()    # and since when (steady ns)
+        self._settled_since = 0
 
         # lockstep: tick ns -> [thrusts, tilts] (None: not yet; _REJECTED: bad message)
         self._pending: dict[int, list[list[float] | None]] = {}
@@ -387,6 +390,15 @@ class PlantSimulator(TiltrovNode):
             if not self.lockstep:
                 self.destroy_timer(self._watchdog_timer)
                 self._start_realtime()
+                return
+            # A match the plant sees is its writer's side: a reader matched a moment ago
+            # may not have matched back and would drop the initial state, unseen (the
+            # reference's /clock reader once: the run waited 10 s at t = 0). The state's
+            # readers must have stayed the same for RECORDER_SETTLE.
+            readers = self._state_readers()
+            if readers != self._settled_readers:
+                self._settled_readers, self._settled_since = readers, now
+            if seconds(now - self._settled_since) < RECORDER_SETTLE:
                 return
             self._started = True
             self._started_at = now
