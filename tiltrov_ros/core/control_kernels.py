@@ -108,6 +108,18 @@ def inverse_norm(q: FloatArray) -> float:  # pragma: no cover - compiled
     return 1.0 / n
 
 
+@kernel()
+def guarded_trig(eta: FloatArray) -> tuple[float, ...]:  # pragma: no cover - compiled
+    """(cos phi, sin phi, cos theta, sin theta, cos psi, sin psi) of eta's angles for
+    J(eta) (A.1), theta held just short of +-90 deg (the gimbal guard, as
+    controllers.tracking_error does)."""
+    phi, theta, psi = eta[3], eta[4], eta[5]
+    if math.fabs(math.cos(theta)) < GIMBAL_GUARD_COS:
+        theta = math.copysign(math.acos(GIMBAL_GUARD_COS), theta)
+    return (math.cos(phi), math.sin(phi), math.cos(theta), math.sin(theta),
+            math.cos(psi), math.sin(psi))
+
+
 @kernel('int64(float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], '
         'float64[::1], float64[::1])', group='control')
 def tracking(position: FloatArray, quaternion: FloatArray, nu: FloatArray,
@@ -131,12 +143,7 @@ def tracking(position: FloatArray, quaternion: FloatArray, nu: FloatArray,
     for i in range(3, 6):
         e[i] = ssa(e[i] - eta[i])
     # J(eta) (A.1), evaluated just short of pitch +-90 deg.
-    phi, theta, psi = eta[3], eta[4], eta[5]
-    if math.fabs(math.cos(theta)) < GIMBAL_GUARD_COS:
-        theta = math.copysign(math.acos(GIMBAL_GUARD_COS), theta)
-    cphi, sphi = math.cos(phi), math.sin(phi)
-    cth, sth = math.cos(theta), math.sin(theta)
-    cpsi, spsi = math.cos(psi), math.sin(psi)
+    cphi, sphi, cth, sth, cpsi, spsi = guarded_trig(eta)
     J = work[WORK_J:WORK_J + 36]
     for i in range(36):
         J[i] = 0.0
@@ -170,12 +177,7 @@ def earth_shortfall(eta: FloatArray, short: FloatArray,
                     earth: FloatArray) -> None:  # pragma: no cover - compiled
     """earth = J(eta)^-T short (controllers.earth_shortfall): R (A.1) on the forces,
     T(eta)^-T on the moments, with the gimbal guard of J."""
-    phi, theta, psi = eta[3], eta[4], eta[5]
-    if math.fabs(math.cos(theta)) < GIMBAL_GUARD_COS:
-        theta = math.copysign(math.acos(GIMBAL_GUARD_COS), theta)
-    cphi, sphi = math.cos(phi), math.sin(phi)
-    cth, sth = math.cos(theta), math.sin(theta)
-    cpsi, spsi = math.cos(psi), math.sin(psi)
+    cphi, sphi, cth, sth, cpsi, spsi = guarded_trig(eta)
     x, y, z = short[0], short[1], short[2]
     earth[0] = cpsi * cth * x + (-spsi * cphi + cpsi * sth * sphi) * y \
         + (spsi * sphi + cpsi * cphi * sth) * z
