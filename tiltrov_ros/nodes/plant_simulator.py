@@ -402,7 +402,7 @@ class PlantSimulator(TiltrovNode):
                 return
             self._started = True
             self._started_at = now
-            self._initial_readers = self._state_readers()
+            self._initial_readers = readers
             self._publish_state()
             self._advance()
             return
