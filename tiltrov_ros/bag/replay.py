@@ -19,16 +19,12 @@ import time
 from typing import Any
 
 from tiltrov_ros.core.errors import BagError
-from tiltrov_ros.core.names import CLOCK, join_namespace
+from tiltrov_ros.core.names import CLOCK, MATCH_SETTLE, join_namespace
 from tiltrov_ros.core.timebase import ns_to_stamp, seconds, to_ns
 
 from .bagfile import BagInfo, RawMessage, bag_info, iter_raw
 
 _MAX_SLEEP = 0.05  # s: sleep in slices this long so a shutdown is noticed quickly
-# s: after every publisher sees its subscribers, let the subscribers' side finish
-# matching too (DDS matches the two ends separately; a volatile reader drops what
-# a writer sends before the reader has matched it).
-SETTLE = 0.25
 
 
 def parse_remaps(items: Sequence[str]) -> dict[str, str]:
@@ -123,7 +119,7 @@ class Player:
         while (time.monotonic() < deadline and self._ok(should_stop)
                and not all(p.get_subscription_count() > 0 for p in publishers)):
             time.sleep(0.01)
-        self._sleep_until(time.monotonic() + SETTLE, should_stop)
+        self._sleep_until(time.monotonic() + MATCH_SETTLE, should_stop)
 
     def _timed(self) -> Iterator[tuple[int, str, bytes]]:
         """(time, topic, payload) of the recorded messages, in the order to publish them.

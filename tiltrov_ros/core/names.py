@@ -133,3 +133,13 @@ def join_namespace(namespace: str, name: str) -> str:
         return name
     namespace = namespace.rstrip('/')
     return f'{namespace}/{name}' if namespace else f'/{name}'
+
+
+# --------------------------------------------------------------------------- DDS
+#: s (wall) a match seen from one end must hold before the first message goes: DDS
+#: matches a writer and a reader separately, and a volatile reader drops what a writer
+#: sends before the reader has matched it. The nodes' hold for the recorder, the
+#: plant's initial state and the player wait this long (0.25 s let a replay's first
+#: samples go to a reader not yet matched: they came in a burst 80 ms late; a restarted
+#: node's first answers were missing from the bag without it).
+MATCH_SETTLE = 0.5

@@ -34,6 +34,7 @@ from tiltrov_ros.core.names import (
     DIAGNOSTICS,
     FINAL_STATUS_KEY,
     KERNEL_WARMUP_KEY,
+    MATCH_SETTLE,
     join_namespace,
 )
 from tiltrov_ros.core.paramtable import Param, ParamTable
@@ -61,8 +62,6 @@ DIAGNOSTICS_PERIOD = 1.0
 #: how long it waits at most before it publishes anyway (``wait_for_recorder``).
 RECORDER_POLL = 0.02
 RECORDER_WAIT = 10.0
-#: s (wall) the recorder's match must hold before held outputs go (see _check_recorder).
-RECORDER_SETTLE = 0.5
 #: s (wall): how long a node that stops waits at most for its readers to acknowledge
 #: its last messages (below the launcher's SIGINT timeout, stack/supervisor.py). A
 #: reader that fell behind (the recorder on a loaded machine) asks for what it missed
@@ -324,12 +323,12 @@ class TiltrovNode(InputGuard, Node):
         # matches the writer when its own discovery gets there, and a volatile reader
         # drops what came before that. A restarted node saw its side first and lost the
         # recorder its first answers (the killed-node test, 3 of 6 suites on the faster
-        # stack): the match must hold for RECORDER_SETTLE before the outputs go.
+        # stack): the match must hold for MATCH_SETTLE before the outputs go.
         if not self.recorder_reads_every_topic():
             self._matched_since = None
         elif self._matched_since is None:
             self._matched_since = now
-        ready = self._matched_since is not None and now - self._matched_since >= RECORDER_SETTLE
+        ready = self._matched_since is not None and now - self._matched_since >= MATCH_SETTLE
         if not ready and waited < RECORDER_WAIT:
             return
         if self._hold_timer is not None:

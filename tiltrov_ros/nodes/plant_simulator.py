@@ -22,7 +22,7 @@ Modes (parameter ``mode``):
   initial state it waits until ``startup_subscribers`` readers are matched on
   ``odom`` and a publisher on each command topic, then ``startup_delay``
   wall seconds more, and until the readers of the state have not changed for
-  ``RECORDER_SETTLE`` (0.5 s). If the commands of a tick
+  ``MATCH_SETTLE`` (0.5 s). If the commands of a tick
   have not come after ``stall_timeout`` wall seconds, the wait is reported on
   ``/diagnostics`` as a stall and the state at t_i (joint_states, odom, clock)
   is published again, so a lost message or a restarted controller resumes the
@@ -65,6 +65,7 @@ from tiltrov_ros.core.names import (
     CLOCK,
     JOINT_STATES,
     LOCKSTEP,
+    MATCH_SETTLE,
     ODOM,
     PLANT,
     THRUST_CMD,
@@ -81,7 +82,7 @@ from tiltrov_ros.core.validation import (
     failed_thruster_indices,
 )
 
-from .base import OK, RECORDER_SETTLE, RECORDER_WAIT, WARN, TiltrovNode
+from .base import OK, RECORDER_WAIT, WARN, TiltrovNode
 from .conversions import (
     fill_joint_state,
     fill_odometry,
@@ -394,11 +395,11 @@ class PlantSimulator(TiltrovNode):
             # A match the plant sees is its writer's side: a reader matched a moment ago
             # may not have matched back and would drop the initial state, unseen (the
             # reference's /clock reader once: the run waited 10 s at t = 0). The state's
-            # readers must have stayed the same for RECORDER_SETTLE.
+            # readers must have stayed the same for MATCH_SETTLE.
             readers = self._state_readers()
             if readers != self._settled_readers:
                 self._settled_readers, self._settled_since = readers, now
-            if seconds(now - self._settled_since) < RECORDER_SETTLE:
+            if seconds(now - self._settled_since) < MATCH_SETTLE:
                 return
             self._started = True
             self._started_at = now
