@@ -37,6 +37,7 @@ from stack_messages import (
 from std_msgs.msg import String
 
 from tiltrov_ros.bag.bagfile import RUN_INFO_KEY
+from tiltrov_ros.bag.losses import losses
 from tiltrov_ros.core.errors import ParameterError
 from tiltrov_ros.core.timebase import cdr_stamp_ns
 from tiltrov_ros.nodes.bag_recorder import BagRecorder
@@ -238,3 +239,38 @@ def test_recorder_command_quotes_strings() -> None:
                     '-p', "compression:='zstd'", '-p', 'flush_period:=0.5',
                     '-p', "topics:=['odom', '/clock']",
                     '-p', """run_info:='{"scenario": "it''s"}'"""]
+
+
+def test_discovery_racing_a_shutdown_is_not_a_loss(tmp_path: Path) -> None:
+    """A discovery tick that runs as a signal shuts the context down finds the graph
+    gone: that loses nothing, and the recorder must not exit as if it had."""
+    import rclpy
+    from rclpy.context import Context
+    context = Context()
+    rclpy.init(context=context)
+    recorder = BagRecorder(context=context, parameter_overrides={'output': str(tmp_path / 'b')})
+    try:
+        rclpy.shutdown(context=context)
+        recorder._discover()
+        assert recorder.stats().errors == 0 and not recorder.lost_data
+    finally:
+        recorder.destroy_node()
+    assert losses(tmp_path / 'b').recorder['write_errors'] == 0
+
+
+def test_discovery_failing_mid_run_is_reported(ros: Any, tmp_path: Path,
+                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    """While the context is up, a failed discovery may leave a topic unrecorded: the
+    recorder counts it and names it as its first error."""
+    recorder = ros.add(BagRecorder(context=ros.context,
+                                   parameter_overrides={'output': str(tmp_path / 'b')}))
+
+    def broken() -> list[Any]:
+        raise RuntimeError('graph unavailable')
+    monkeypatch.setattr(recorder, 'get_topic_names_and_types', broken)
+    recorder._discover()
+    assert recorder.lost_data and recorder.stats().errors == 1
+    assert recorder.first_error == 'graph discovery failed: graph unavailable'
+    recorder.close()
+    account = losses(tmp_path / 'b').recorder
+    assert account['write_errors'] == 1 and 'graph unavailable' in account['first_error']

@@ -244,10 +244,14 @@ class BagRecorder(TiltrovNode):
                     self.get_logger().info(f'{name}: adapting the subscription QoS to its '
                                            'publishers')
                     self._subscribe(name, topic.msgtype, infos)
-        except Exception as exc:  # graph queries during shutdown; never kill the executor
-            self._errors += 1
-            self.get_logger().error(f'graph discovery failed: {exc}',
-                                    throttle_duration_sec=_THROTTLE)
+        except Exception as exc:  # never kill the executor
+            if not self.context.ok():
+                # A signal shut the context down while a discovery tick ran: nothing
+                # is lost (close() still drains every subscription).
+                self.get_logger().debug(f'graph discovery during shutdown: {exc}')
+                return
+            # Mid-run: a topic may go unrecorded, so the bag must say so.
+            self._write_error(f'graph discovery failed: {exc}')
 
     # -- messages ----------------------------------------------------------------
 
