@@ -158,7 +158,7 @@ def test_lockstep_a_command_for_a_tick_not_reached_is_rejected(rig) -> None:
     assert node.plant.thrusters.command_held == (1.0, 1.0, 1.0, 1.0)
 
 
-def test_lockstep_stall_republishes_the_tick_and_is_reported(rig) -> None:
+def test_lockstep_stall_republishes_the_tick_and_is_reported(rig, capfd) -> None:
     ros, probe, command, _ = rig
     node = _plant(ros, mode='lockstep', stall_timeout=0.05)
     assert ros.spin_until(lambda: probe.stamps('odom') == [0])
@@ -179,9 +179,15 @@ def test_lockstep_stall_republishes_the_tick_and_is_reported(rig) -> None:
                   if s.name.endswith('plant_simulator') and s.level == b'\x01')
     values = {kv.key: kv.value for kv in status.values}
     assert int(values['stalls']) >= 1 and values['mode'] == 'lockstep'
+    assert float(values['last_stall']) == pytest.approx(0.05)
     # The answer resumes the run.
     command(5 * STEP, [0.0] * 4, [0.0, 0.0])
     assert ros.spin_until(lambda: node.plant.time_ns == 10 * STEP)
+    # The next tick stalls too, well within the repeats' throttle: told at once.
+    assert ros.spin_until(lambda: node.last_stall_ns == 10 * STEP, timeout=5.0)
+    ros.spin_for(0.2)
+    told = capfd.readouterr().err
+    assert told.count('stall at 0.050 s') >= 1 and told.count('stall at 0.100 s') >= 1, told
 
 
 def test_lockstep_waits_for_its_peers_before_the_initial_state(ros) -> None:

@@ -197,6 +197,7 @@ class PlantSimulator(TiltrovNode):
         self.stale_events = 0
         self._update_failed()
         self.stalls = 0
+        self.last_stall_ns: int | None = None     # the tick of the latest stall
         self.startup_retries = 0
         self.republished = 0
         self.overruns = 0
@@ -429,10 +430,15 @@ class PlantSimulator(TiltrovNode):
             self._stalled = True
             entry = self._pending.get(t, [None, None])
             missing = [name for name, got in zip((THRUST_CMD, TILT_CMD), entry) if got is None]
-            self.get_logger().warning(
-                f'stall at {format_ns(t)}: no {" and ".join(missing)} stamped with it after '
-                f'{waited:.2f} s; publishing the state at {format_ns(t)} again',
-                throttle_duration_sec=THROTTLE)
+            text = (f'stall at {format_ns(t)}: no {" and ".join(missing)} stamped with it '
+                    f'after {waited:.2f} s; publishing the state at {format_ns(t)} again')
+            # The first stall at a tick is always told (a kill right after a slow start
+            # stalls a new tick within the throttle); its repeats are throttled.
+            if self.last_stall_ns != t:
+                self.last_stall_ns = t
+                self.get_logger().warning(text)
+            else:
+                self.get_logger().warning(text, throttle_duration_sec=THROTTLE)
             self._republish()
 
     def _republish(self) -> None:
@@ -544,6 +550,7 @@ class PlantSimulator(TiltrovNode):
             'mode': self.config.mode, 'sim_time': seconds(t),
             'real_time_factor_achieved': self._rtf_achieved,
             'stalls': self.stalls, 'startup_retries': self.startup_retries,
+            'last_stall': seconds(self.last_stall_ns) if self.last_stall_ns is not None else '',
             'republished_states': self.republished, 'overruns': self.overruns,
             'rejected_thrust_commands': plant.thrusters.rejected,
             'rejected_tilt_commands': plant.servos.rejected,
