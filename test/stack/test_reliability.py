@@ -596,7 +596,7 @@ def test_a_recorder_that_falls_behind_fails_the_launch_and_bag_info_says_what_wa
         ros: Any, tmp_path: Path) -> None:
     """The recorder stopped (SIGSTOP) for 135 s of a realtime run at x10: more samples
     go by than the writers keep for a reader that does not acknowledge (10000 steps of
-    the plant's state) and than a transport buffers for it (the plant alone
+    the plant's state, 1000 ticks) and than a transport buffers for it (the plant alone
     sends some 150 kB per second of sim; a socket here buffers at most 4 MB), so the
     recording loses them for real, as an overloaded recorder does. The launch exits 1
     saying what was lost, and ``tiltrov bag info`` says the same (before: exit code 0;

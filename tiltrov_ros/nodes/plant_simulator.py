@@ -96,7 +96,7 @@ from .guard import THROTTLE, guarded, input_callback
 from .markers import RobotMarkers
 from .parameters import Overrides
 from .plant_config import declare_parameters
-from .qos import PUBLISHER_QOS, RELIABLE_QOS
+from .qos import RELIABLE_QOS, STATE_QOS
 from .serialized import SerializedTemplate
 from .transforms import robot_transforms
 
@@ -157,9 +157,9 @@ class PlantSimulator(TiltrovNode):
         self.finished: Future = Future()
 
         # Guarded: a non-finite state (a diverged integration) is withheld and counted.
-        self._odom_pub = self.create_safe_publisher(Odometry, ODOM, PUBLISHER_QOS)
-        self._joint_pub = self.create_safe_publisher(JointState, JOINT_STATES, PUBLISHER_QOS)
-        self._clock_pub = self.create_safe_publisher(ClockMsg, CLOCK, PUBLISHER_QOS)
+        self._odom_pub = self.create_safe_publisher(Odometry, ODOM, STATE_QOS)
+        self._joint_pub = self.create_safe_publisher(JointState, JOINT_STATES, STATE_QOS)
+        self._clock_pub = self.create_safe_publisher(ClockMsg, CLOCK, STATE_QOS)
         self.expect_single_source(ODOM, JOINT_STATES, CLOCK)
         c = self.config
         self.markers = (RobotMarkers(self, c.robot.length, c.robot.width, c.markers_period_ns,

@@ -30,21 +30,24 @@ RELIABLE_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
 #: The stack's publishers: reliable, with a history deep enough that a sample a
 #: slow reader (the bag recorder on a loaded machine) has not acknowledged yet is
 #: still there to be resent: a KEEP_LAST writer drops its oldest sample when the
-#: history is full, acknowledged or not. Lockstep publishes the plant's per-step
-#: topics thousands of times per wall second and the tick topics hundreds: 1000
-#: samples were a third of a second of a recorder's lag on the first and, at 31
-#: times real time, 1.6 s on the second (a recorded 120 s run lost 9 wrench_cmd and
-#: 10 wrench_achieved). 10000 are 100 s of sim time of steps and 500 s of ticks, as
-#: deep as the recorder's own queues (Fast DDS frees what every reader acknowledged:
-#: a reader that keeps up costs no memory).
+#: history is full, acknowledged or not. In lockstep the plant publishes up to
+#: hundreds of steps per wall second; 1000 samples are seconds of them.
 PUBLISHER_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
                            durability=DurabilityPolicy.VOLATILE,
-                           history=HistoryPolicy.KEEP_LAST, depth=10000)
+                           history=HistoryPolicy.KEEP_LAST, depth=1000)
 #: The reference publisher's own /clock reader: reliable, deep enough that a
 #: burst of lockstep steps is never overwritten before it is taken.
 CLOCK_READER_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
                               durability=DurabilityPolicy.VOLATILE,
                               history=HistoryPolicy.KEEP_LAST, depth=100)
+#: The plant's per-step topics (``/clock``, ``joint_states``, ``odom``, ``/tf``): as
+#: :data:`PUBLISHER_QOS`, ten times deeper. Lockstep publishes them thousands of times per
+#: wall second, so 1000 samples were a third of a second of a recorder's lag; 10000 are
+#: 100 s of sim time, as deep as the recorder's own queues (Fast DDS frees what every
+#: reader acknowledged: a reader that keeps up costs no memory).
+STATE_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.VOLATILE,
+                       history=HistoryPolicy.KEEP_LAST, depth=10000)
 #: Written once and kept for every reader, late ones too (``/tf_static``,
 #: ``robot_description``): reliable, transient local, the last sample, as tf2's static
 #: broadcaster and robot_state_publisher offer them.

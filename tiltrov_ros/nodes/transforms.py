@@ -53,7 +53,7 @@ from tiltrov_ros.core.robot_description import link_quaternion_values, robot_urd
 
 from .base import TiltrovNode
 from .conversions import set_stamp
-from .qos import LATCHED_QOS, PUBLISHER_QOS
+from .qos import LATCHED_QOS, STATE_QOS
 from .serialized import SerializedTemplate
 
 try:
@@ -95,7 +95,7 @@ class RobotTransforms:
 
     def __init__(self, node: TiltrovNode, robot: RobotParams, ns: int, *,
                  thrusters: bool) -> None:
-        self.publisher = node.create_safe_publisher(TFMessage, TF, PUBLISHER_QOS)
+        self.publisher = node.create_safe_publisher(TFMessage, TF, STATE_QOS)
         self.static = node.create_safe_publisher(TFMessage, TF_STATIC, LATCHED_QOS)
         self.static.publish(static_message(ns))
         self._joints = tilt_joints(robot.length, robot.width) if thrusters else ()
