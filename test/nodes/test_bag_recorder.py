@@ -15,6 +15,8 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from nav_msgs.msg import Odometry
 import pytest
+import rclpy
+from rclpy.context import Context
 from rclpy.duration import Duration
 from rclpy.exceptions import InvalidParameterValueException
 from rclpy.parameter import Parameter
@@ -244,8 +246,6 @@ def test_recorder_command_quotes_strings() -> None:
 def test_discovery_racing_a_shutdown_is_not_a_loss(tmp_path: Path) -> None:
     """A discovery tick that runs as a signal shuts the context down finds the graph
     gone: that loses nothing, and the recorder must not exit as if it had."""
-    import rclpy
-    from rclpy.context import Context
     context = Context()
     rclpy.init(context=context)
     recorder = BagRecorder(context=context, parameter_overrides={'output': str(tmp_path / 'b')})
