@@ -141,3 +141,14 @@ def test_typed_empty_arrays_and_the_scenario_disturbances(ros) -> None:
                                    parameter_overrides={'scenario': 'pitch_hold',
                                                         'com_error': [0.0, 0.0, 0.0]}))
     assert given.config.disturbances.com_error == (0.0, 0.0, 0.0)
+
+
+def test_a_launch_files_list_values_written_as_python_tuples_are_read(tmp_path) -> None:
+    """launch_ros writes a launch file's list values as ``!!python/tuple`` (rcl reads them
+    as arrays): the command-line order is still applied from that file, list and all."""
+    from tiltrov_ros.nodes.parameters import file_sections
+    path = tmp_path / 'launch_params'
+    path.write_text("/**:\n  ros__parameters:\n    mode: lockstep\n"
+                    "    run_nodes: !!python/tuple\n    - plant_simulator\n    - bag_recorder\n")
+    assert file_sections(str(path)) == {
+        '/**': {'mode': 'lockstep', 'run_nodes': ['plant_simulator', 'bag_recorder']}}

@@ -143,6 +143,10 @@ class _ValueLoader(yaml.SafeLoader):
 _ValueLoader.add_implicit_resolver(
     'tag:yaml.org,2002:float', re.compile(r'^[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)[eE][-+]?[0-9]+$'),
     list('-+0123456789.'))
+# launch_ros writes a launch file's list values as Python tuples (``!!python/tuple``),
+# which rcl reads as arrays: so do these files.
+_ValueLoader.add_constructor('tag:yaml.org,2002:python/tuple',
+                             lambda loader, node: loader.construct_sequence(node))
 
 #: ``--ros-args`` options followed by a value that is not a parameter.
 _OTHER_OPTIONS = ('-r', '--remap', '-e', '--enclave', '--log-level', '--log-config-file',
