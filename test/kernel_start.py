@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import sys
+import time
 from typing import Any
 
 from tiltrov_ros.core import jit
@@ -62,9 +63,8 @@ def _stack() -> tuple[dict[str, Any], Any]:
         for node in nodes:
             executor.add_node(node)
         plant = dict(zip((s.name for s in specs), nodes))[PLANT]
-        for _ in range(6000):
-            if plant.finished.done():
-                break
+        deadline = time.monotonic() + 120.0        # only against a hang
+        while not plant.finished.done() and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.05)
         done = bool(plant.finished.done())
         executor.shutdown()

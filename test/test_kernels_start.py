@@ -71,6 +71,10 @@ def test_on_a_cold_cache_the_constructors_compile_everything_a_run_uses(tmp_path
                             capture_output=True, text=True, timeout=COLD, cwd=REPO,
                             env=_env(NUMBA_CACHE_DIR=str(cache)))
     assert result.returncode == 0, result.stderr
+    # A cold cache is said, once per node's groups, before the compiler's silent minute.
+    told = [line for line in result.stderr.splitlines() if 'tiltrov_ros: compiling the' in line]
+    assert told and all(f'into {cache} (about ' in line and '`tiltrov warmup` does it ahead'
+                        in line for line in told), result.stderr
     report = _last_json(result.stdout)
     assert report['backend'] == 'numba' and report['cache_dir'] == str(cache)
     assert {'plant', 'control'} <= set(report['registered'].values())
@@ -90,6 +94,7 @@ def test_the_runners_objects_warm_themselves() -> None:
     result = subprocess.run([sys.executable, str(REPO / 'test' / 'kernel_start.py'), 'runner'],
                             capture_output=True, text=True, timeout=170, cwd=REPO, env=_env())
     assert result.returncode == 0, result.stderr
+    assert 'compiling the' not in result.stderr      # loaded from the warm cache: not said
     report = _last_json(result.stdout)
     assert report['sealed'] and {'plant', 'control'} <= set(report['registered'].values())
     assert report['compiled_after_construction'] == []

@@ -41,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
     total = 0.0
     for group in groups:
         with jit.compilations() as compiled:
-            seconds = jit.warmup((group,))
+            seconds = jit.warmup((group,), tell=False)
         kernels = len(jit.registered((group,)))
         total += seconds
         how = (f'compiled ({len(compiled)} functions)' if compiled

@@ -68,6 +68,10 @@ GROUPS: dict[str, tuple[str, ...]] = {
     'visual': ('tiltrov_ros.core.visual_kernels',),
 }
 
+#: s: about how long compiling a group takes with an empty cache (2-core machine, one
+#: process); loading it from the cache takes milliseconds to a few tenths.
+COMPILE_SECONDS = {'allocation': 65, 'plant': 3, 'control': 3, 'visual': 2}
+
 _PACKAGE_DIR = Path(__file__).resolve().parent.parent
 
 
@@ -301,12 +305,14 @@ def registered(groups: Iterable[str] | None = None) -> list[Registered]:
     return [k for k in _STATE.kernels if wanted is None or k.group in wanted]
 
 
-def warmup(groups: Iterable[str] | None = None, *, seal: bool = True) -> float:
+def warmup(groups: Iterable[str] | None = None, *, seal: bool = True,
+           tell: bool = True) -> float:
     """Compile or load every kernel of ``groups`` (default: all of :data:`GROUPS`) for its
     signatures; returns the seconds it took (0 with the numpy reference).
 
     Imports the groups' kernel modules first. ``seal``: afterwards a call with
-    types not compiled raises instead of compiling.
+    types not compiled raises instead of compiling. ``tell``: a kernel that must be
+    compiled (not loaded) prints one line first (:func:`_told_before_compiling`).
     """
     if not compiled():
         return 0.0
@@ -320,18 +326,46 @@ def warmup(groups: Iterable[str] | None = None, *, seal: bool = True) -> float:
         for module in GROUPS[group]:
             importlib.import_module(module)
     chosen = registered(names)
-    for k in chosen:
-        if k.sealed:
-            continue
-        for sig in k.signatures:
-            k.dispatcher.compile(sig)
-        if seal:
-            k.dispatcher.disable_compile()
-            k.sealed = True
+    with _told_before_compiling(sorted({k.group for k in chosen if not k.sealed}), tell):
+        for k in chosen:
+            if k.sealed:
+                continue
+            for sig in k.signatures:
+                k.dispatcher.compile(sig)
+            if seal:
+                k.dispatcher.disable_compile()
+                k.sealed = True
     elapsed = time.perf_counter() - start
     key = ','.join(sorted({k.group for k in chosen})) or 'none'
     _STATE.warm_seconds[key] = _STATE.warm_seconds.get(key, 0.0) + elapsed
     return elapsed
+
+
+@contextmanager
+def _told_before_compiling(groups: list[str], tell: bool = True) -> Iterator[None]:
+    """Within the block, the first kernel numba must compile (not load from the cache)
+    prints one line first on stderr: what, about how long, and that ``tiltrov warmup``
+    does it ahead (a cold cache is otherwise a silent minute)."""
+    from numba.core import event
+
+    told = not tell
+
+    class Teller(event.Listener):
+        def on_start(self, ev: Any) -> None:
+            nonlocal told
+            if told:
+                return
+            told = True
+            about = sum(COMPILE_SECONDS.get(g, 10) for g in groups)
+            print(f'tiltrov_ros: compiling the {", ".join(groups)} kernels into '
+                  f'{_STATE.cache_dir} (about {about} s, once per change of the sources; '
+                  '`tiltrov warmup` does it ahead)', file=sys.stderr, flush=True)
+
+        def on_end(self, ev: Any) -> None:
+            pass
+
+    with event.install_listener('numba:compile', Teller()):
+        yield
 
 
 def overloads() -> dict[str, int]:
