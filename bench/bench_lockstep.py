@@ -97,13 +97,17 @@ def latency(seconds_of_sim: float, real_time_factor: float,
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import JointState
 
+    from tiltrov_ros.cli.launch import add_arguments, options_from_args
     from tiltrov_ros.core.names import ODOM, THRUST_CMD, WRENCH_CMD
     from tiltrov_ros.nodes.conversions import stamp_ns
+    from tiltrov_ros.nodes.handshake import Handshake
+    from tiltrov_ros.stack.specs import run_node_names
 
     args = ['--scenario', 'pitch_hold', '--realtime', '--real-time-factor',
             repr(float(real_time_factor)), '--duration', repr(seconds_of_sim),
-            # The plant starts the clock once the controller and this probe read odom.
-            '--param', 'plant_simulator:startup_subscribers:=2']
+            # The probe joins the run's handshake: time starts once it has matched the
+            # stack's writers and they have matched it, seen from both sides.
+            '--join', 'latency_probe']
     if single_process:
         args.append('--single-process')
     # topic -> stamp -> (source timestamp, reception timestamp), ns
@@ -116,39 +120,24 @@ def latency(seconds_of_sim: float, real_time_factor: float,
                                     int(info['received_timestamp'])))
         return callback
 
-    # The probe's participant is created while the nodes start (once the launcher has
-    # started the plant's process): without multicast, participants created far apart
-    # in time find each other only at the next periodic announcement (Fast DDS: 3 s),
-    # see docs/launch.md, "Lockstep and realtime".
     launch = subprocess.Popen(_launch_argv(*args), stdout=subprocess.PIPE,
                               stderr=subprocess.STDOUT, text=True, cwd=tempfile.gettempdir())
     lines: list[str] = []
-    assert launch.stdout is not None
-    for line in launch.stdout:
-        lines.append(line)
-        if 'started plant_simulator' in line or '[plant_simulator]' in line:
-            break
     context = Context()
     rclpy.init(context=context)
     node = rclpy.create_node('latency_probe', context=context)
     qos = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_ALL)
-    wrench_sub = node.create_subscription(WrenchStamped, WRENCH_CMD, keep('wrench'), qos)
-    thrust_sub = node.create_subscription(JointState, THRUST_CMD, keep('thrust'), qos)
+    node.create_subscription(WrenchStamped, WRENCH_CMD, keep('wrench'), qos)
+    node.create_subscription(JointState, THRUST_CMD, keep('thrust'), qos)
+    node.create_subscription(Odometry, ODOM, keep('odom'), qos)
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    Handshake(node, run_node_names(options_from_args(parser.parse_args(args)))).start()
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     reader = threading.Thread(target=lambda: lines.extend(launch.stdout or ()), daemon=True)
     reader.start()
     try:
-        # The plant starts its clock once two nodes read odom (the controller and
-        # this probe): read odom only once the controller's and the allocator's
-        # writers are matched, so no answer of the run is missed (discovery
-        # without multicast can take seconds).
-        deadline = time.monotonic() + 30.0
-        while (wrench_sub.get_publisher_count() < 1 or thrust_sub.get_publisher_count() < 1):
-            if time.monotonic() > deadline or launch.poll() is not None:
-                raise RuntimeError('the probe never saw the wrench_cmd and thrust_cmd writers')
-            executor.spin_once(timeout_sec=0.05)
-        node.create_subscription(Odometry, ODOM, keep('odom'), qos)
         while launch.poll() is None:
             executor.spin_once(timeout_sec=0.05)
         reader.join(timeout=5.0)

@@ -235,7 +235,7 @@ def run_stack(context: Any, executor: Any, options: LaunchOptions, *,
         spin(executor, lambda: ('odom' not in topics or (probe.stamps('odom') or [0])[-1] >= end)
              and (last is None or last(probe, end)), 5.0)
         run.extra['stalls'] = plant.stalls
-        run.extra['startup_retries'] = plant.startup_retries
+        run.extra['republished'] = plant.republished
     finally:
         for node in (*nodes, probe_node):
             executor.remove_node(node)

@@ -52,6 +52,7 @@ def test_records_a_live_run_byte_for_byte(ros: Any, tmp_path: Path) -> None:
     recorder = ros.add(BagRecorder(context=ros.context, parameter_overrides={
         'output': str(bag), 'run_info': json.dumps(RUN_INFO), 'discovery_period': 0.1,
         'exclude_topics': ['/rosout', '/parameter_events']}))  # every other topic
+    recorder._diagnostics_timer.cancel()     # its own /diagnostics: none here, only the stack's
     stack = ros.node('stack')
     best_effort = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
     publishers = {
@@ -104,7 +105,9 @@ def test_records_a_live_run_byte_for_byte(ros: Any, tmp_path: Path) -> None:
     for topic, msgs in sent.items():
         normal = [canonical(serialize_message(m), types[topic]) for m in msgs]
         assert got[topic] == normal, topic
-    assert [q.reliability for q in qos['/diagnostics']] == [QosReliability.BEST_EFFORT]
+    # The stack's /diagnostics writer (best effort) and the recorder's own (reliable).
+    assert sorted(q.reliability.value for q in qos['/diagnostics']) == [
+        QosReliability.RELIABLE.value, QosReliability.BEST_EFFORT.value]
     assert [q.reliability for q in qos['/odom']] == [QosReliability.RELIABLE]
     assert json.loads(custom[RUN_INFO_KEY]) == RUN_INFO
 

@@ -126,12 +126,12 @@ def test_lockstep_a_late_first_answer_gets_the_initial_state_once(rig) -> None:
     steps = [i * STEP for i in range(6)]
     assert ros.spin_until(lambda: probe.stamps('/clock') == steps)
     assert probe.stamps('odom') == probe.stamps('joint_states') == steps
-    assert (node.startup_retries, node.stalls) == (0, 0)
+    assert node.republished == 0 and node.stalls >= 1      # reported, nothing sent again
 
 
 def test_lockstep_a_reader_matched_after_the_initial_state_gets_it_again(rig) -> None:
-    """A reader of odom matched once the initial state is out (a node started late)
-    cannot have it: the plant publishes it again."""
+    """Alone (no run nodes), a reader of odom matched on the plant's side once the initial
+    state is out (a node started late) cannot have it: the plant publishes it again."""
     ros, probe, _command, _ = rig
     node = _plant(ros, mode='lockstep')
     assert ros.spin_until(lambda: probe.stamps('odom') == [0])
@@ -139,7 +139,7 @@ def test_lockstep_a_reader_matched_after_the_initial_state_gets_it_again(rig) ->
     # Both readers get the second copy; which one first is up to the executor.
     assert ros.spin_until(lambda: late.stamps('odom') == [0]
                           and probe.stamps('odom') == [0, 0])
-    assert node.startup_retries == 1
+    assert node.republished == 1
 
 
 def test_lockstep_a_command_for_a_tick_not_reached_is_rejected(rig) -> None:
@@ -158,36 +158,38 @@ def test_lockstep_a_command_for_a_tick_not_reached_is_rejected(rig) -> None:
     assert node.plant.thrusters.command_held == (1.0, 1.0, 1.0, 1.0)
 
 
-def test_lockstep_stall_republishes_the_tick_and_is_reported(rig, capfd) -> None:
+def test_lockstep_a_stall_is_reported_and_changes_nothing(rig, capfd) -> None:
+    """A tick nobody answers for longer than ``stall_timeout`` is a stall: logged and on
+    /diagnostics (WARN), nothing sent again, and the answer, however late, resumes the run."""
     ros, probe, command, _ = rig
     node = _plant(ros, mode='lockstep', stall_timeout=0.05)
     assert ros.spin_until(lambda: probe.stamps('odom') == [0])
     command(0, [0.0] * 4, [0.0, 0.0])
     assert ros.spin_until(lambda: node.plant.time_ns == 5 * STEP)
-    # Nobody answers the tick at 50 ms: its state comes again, and /diagnostics says so.
-    assert ros.spin_until(lambda: probe.stamps('odom').count(5 * STEP) >= 3
-                          and probe.stamps('/clock').count(5 * STEP) >= 3, timeout=10.0)
-    assert node.stalls >= 2
 
     def warned() -> bool:
         return any(s.name.endswith('plant_simulator') and s.level == b'\x01'
                    and 'stalled' in s.message
                    for msg in probe['/diagnostics'] for s in msg.status)
 
-    assert ros.spin_until(warned, timeout=5.0)
+    assert ros.spin_until(warned, timeout=10.0)
     status = next(s for msg in probe['/diagnostics'] for s in msg.status
                   if s.name.endswith('plant_simulator') and s.level == b'\x01')
     values = {kv.key: kv.value for kv in status.values}
-    assert int(values['stalls']) >= 1 and values['mode'] == 'lockstep'
+    assert int(values['stalls']) == 1 and values['mode'] == 'lockstep'
     assert float(values['last_stall']) == pytest.approx(0.05)
+    assert values['waiting_for'] == 'the commands of the tick'
+    assert probe.stamps('odom').count(5 * STEP) == 1 and node.republished == 0
     # The answer resumes the run.
     command(5 * STEP, [0.0] * 4, [0.0, 0.0])
     assert ros.spin_until(lambda: node.plant.time_ns == 10 * STEP)
     # The next tick stalls too, well within the repeats' throttle: told at once.
     assert ros.spin_until(lambda: node.last_stall_ns == 10 * STEP, timeout=5.0)
-    ros.spin_for(0.2)
+    assert node.stalls == 2
+    assert ros.spin_until(lambda: probe.stamps('odom')[-1:] == [10 * STEP])
+    assert probe.stamps('odom') == [i * STEP for i in range(11)]
     told = capfd.readouterr().err
-    assert told.count('stall at 0.050 s') >= 1 and told.count('stall at 0.100 s') >= 1, told
+    assert told.count('stall at 0.050 s') == 1 and told.count('stall at 0.100 s') == 1, told
 
 
 def test_lockstep_waits_for_its_peers_before_the_initial_state(ros) -> None:

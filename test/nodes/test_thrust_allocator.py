@@ -428,36 +428,6 @@ def test_a_broken_yaml_stops_the_process_naming_file_parameter_and_range(
     assert f"thrust_allocator: parameter {message.format(file=bad)}" in result.stderr
 
 
-def test_wait_for_recorder_holds_the_answers_until_the_recorder_reads_every_topic(rig) -> None:
-    """``wait_for_recorder`` (set by ``tiltrov launch --record`` in lockstep): nothing
-    goes out until a node of that name subscribes to every topic of the allocator;
-    then the held answers go out, in order, unchanged."""
-    ros, _, probe, pub = rig
-    node = _allocator(ros, wait_for_recorder='bag_recorder')
-    assert ros.spin_until(lambda: pub.get_subscription_count() > 0)
-    pub.publish(wrench(0, W1))
-    pub.publish(wrench(TICK, W2))
-    ros.spin_for(0.5)
-    assert probe['thrust_cmd'] == [] and node.ticks == 2     # allocated, held
-    recorder = ros.node('bag_recorder')
-    for topic, msg_type in (('thrust_cmd', JointState), ('tilt_cmd', JointState)):
-        recorder.create_subscription(msg_type, topic, lambda m: None, KEEP_ALL)
-    ros.spin_for(0.5)
-    assert probe['thrust_cmd'] == []           # wrench_achieved is not read yet
-    recorder.create_subscription(WrenchStamped, 'wrench_achieved', lambda m: None, KEEP_ALL)
-    assert ros.spin_until(_answered(probe, 2))
-    for topic in ('thrust_cmd', 'tilt_cmd', 'wrench_achieved'):
-        assert [stamp_ns(m.header.stamp) for m in _answers(probe, topic)] == [0, TICK]
-    core = _core()
-    r1 = core.allocate(np.array(W1))
-    np.testing.assert_array_equal(effort_rows(probe['thrust_cmd'])[0], r1.thrusts)
-    pub.publish(wrench(2 * TICK, W1))                # no longer held
-    assert ros.spin_until(_answered(probe, 3))
-    # The wrench of 2 * TICK is answered (a failsafe may come first: a second passed).
-    assert [stamp_ns(m.header.stamp) for m in _answers(probe, 'thrust_cmd')] == [
-        0, TICK, 2 * TICK]
-
-
 def test_measured_tilts_from_joint_states_are_the_starting_point(rig) -> None:
     """tilt_source measured: the servos lag their commands, so the next allocation
     starts (and moves at most max_tilt_step) from the tilts joint_states reports, the

@@ -140,16 +140,42 @@ def test_switching_publishes_its_tilt_request_with_the_same_stamp(rig) -> None:
     np.testing.assert_array_equal(wrench_rows(probe['wrench_cmd'])[0], expected.wrench)
 
 
-def test_missing_setpoint_velocity_reads_as_zero_after_the_timeout(rig) -> None:
+def test_lockstep_waits_for_a_published_setpoint_velocity_however_long(rig) -> None:
+    """A node publishes setpoint_velocity at the first tick: every tick waits for it; a
+    wait longer than ``input_timeout`` is reported, never replaced by zero."""
     ros, probe, send, ready = rig
     node = _controller(ros, mode='lockstep', input_timeout=0.05)
     assert ros.spin_until(ready)
     send('odom', 0)
     send('setpoint', 0)
+    assert ros.spin_until(lambda: node.input_waits == 1)
+    assert ros.spin_until(lambda: report(ros, probe, node)['waiting_for'] == 'setpoint_velocity')
+    ros.spin_for(0.3)                 # the late velocity is the input: nothing happens before
+    assert probe['wrench_cmd'] == []
+    send('velocity', 0)
     assert ros.spin_until(lambda: len(probe['wrench_cmd']) == 1)
+    _, expected = _expected('pd')
+    np.testing.assert_array_equal(wrench_rows(probe['wrench_cmd'])[0], expected.wrench)
+    assert node._waits_for == {'setpoint_velocity'}
+
+
+def test_lockstep_without_a_setpoint_velocity_publisher_uses_zero_for_the_run(ros) -> None:
+    """No node publishes setpoint_velocity at the first tick: zero feed-forward for the
+    whole run, said once, and no tick waits for it."""
+    node = ros.node('controller_test')
+    probe = Probe(node, ['wrench_cmd'])
+    odom = node.create_publisher(Odometry, 'odom', KEEP_ALL)
+    setpoint = node.create_publisher(PoseStamped, 'setpoint', KEEP_ALL)
+    controller = _controller(ros, mode='lockstep')
+    assert ros.spin_until(lambda: odom.get_subscription_count() > 0
+                          and setpoint.get_subscription_count() > 0)
+    for count, ns in enumerate((0, TICK), start=1):
+        odom.publish(odometry(ns, POSITION, QUATERNION, NU))
+        setpoint.publish(pose(ns, *SETPOINT))
+        assert ros.spin_until(lambda n=count: len(probe['wrench_cmd']) == n)
     _, expected = _expected('pd', velocity=[0.0] * 6)
     np.testing.assert_array_equal(wrench_rows(probe['wrench_cmd'])[0], expected.wrench)
-    assert node.velocity_timeouts == 1
+    assert controller._waits_for == frozenset() and controller.input_waits == 0
 
 
 def test_realtime_uses_the_latest_setpoint_and_zero_wrench_without_one(rig) -> None:

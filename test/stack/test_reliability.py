@@ -34,7 +34,7 @@ from ros_stack import (
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
-from tiltrov_ros.core.names import ALLOCATOR, CONTROLLER, FINAL_STATUS_KEY, PLANT, REFERENCE
+from tiltrov_ros.core.names import ALLOCATOR, CONTROLLER, PLANT, REFERENCE
 from tiltrov_ros.core.timebase import NS_PER_S
 from tiltrov_ros.nodes.conversions import set_stamp, stamp_ns
 from tiltrov_ros.paths import config_file
@@ -166,10 +166,7 @@ class _SimTime:
 
 #: The plant's odom readers before it starts: the controller, the recorder and the test.
 _WAIT_FOR_THE_TEST = ('--param', 'plant_simulator:startup_subscribers:=3')
-#: s of sim: the first step after the first tick. In lockstep every node has then
-#: published (the tick's answer), so each has seen the recorder read all its topics
-#: (nodes hold their output until it does): the recorder stopped any earlier can leave
-#: a node waiting 10 s for it (RECORDER_WAIT), and the loop stalled that long at 0 s.
+#: s of sim: the first step after the first tick (every node has answered once).
 _FIRST_TICK_ANSWERED = 0.01
 
 
@@ -615,21 +612,38 @@ def test_a_recorder_that_falls_behind_fails_the_launch_and_bag_info_says_what_wa
 
 
 @pytest.mark.slow
-def test_a_recorder_behind_at_the_end_of_a_run_loses_nothing(ros: Any, tmp_path: Path) -> None:
-    """The recorder stopped from the first tick of a recorded 8 s lockstep run and
-    resumed 1.5 s after the plant's last state (a loaded machine: the recorder that far
-    behind when the run ends; fewer samples than the writers keep, so none is dropped
-    before it comes back). Every node waits until its readers acknowledged its messages
-    before it goes: the bag has every step and tick and the launch exits 0 (before: the
-    plant waited 0.5 s, the others none after the launcher's SIGINT, and what the
-    recorder had not taken went with them: the last 8 s of every topic lost, exit
-    code 0)."""
+def test_a_stopped_recorder_holds_a_paced_run_and_nothing_is_lost(ros: Any,
+                                                                  tmp_path: Path) -> None:
+    """The recorder stopped (SIGSTOP) from the first tick of a recorded 8 s lockstep run
+    (a recorder starved on a loaded machine): the plant, paced by it, stops at most
+    ``recorder_window`` of sim time ahead of what the bag has and says it waits for it
+    (``waiting_for_recorder``, not a stall); resumed (SIGCONT), the run goes on, the bag
+    has every step and tick and the launch exits 0 (before: nothing waited for the
+    recorder, which lost what overflowed the writers' histories)."""
     bag = tmp_path / 'bag'
-    code, output = _recorder_stopped(
-        ros, tmp_path, bag, ('--duration', '8'), _FIRST_TICK_ANSWERED,
-        lambda sim, _: sim.reached(8), timeout=120.0,
-        behind=1.5)     # how far behind the recorder is: the attack's input
-    assert code == 0, output
+    sim = _SimTime(ros.node('sim_time_probe'))
+    launch = LaunchProcess(tmp_path, '--duration', '8', *_WAIT_FOR_THE_TEST, '--record', str(bag))
+    try:
+        pids = launch.wait_running()
+        probe = ready(ros, (PLANT,))
+        assert ros.spin_until(lambda: sim.reached(_FIRST_TICK_ANSWERED), timeout=60.0)
+        os.kill(pids['bag_recorder'], signal.SIGSTOP)
+        try:
+            def held() -> bool:
+                plant = diagnostics(probe, PLANT)
+                return plant.get('waiting_for_recorder') == 'True'
+
+            assert ros.spin_until(held, timeout=60.0), launch.output
+            plant = diagnostics(probe, PLANT)
+            # recorder_window (1 s) ahead of its progress at most, and not a stall
+            assert float(plant['sim_time']) <= 1.0 + 0.05 + float(plant['recorder_progress'] or 0)
+            assert plant['waiting_for'] == 'bag_recorder (paced)'
+        finally:
+            os.kill(pids['bag_recorder'], signal.SIGCONT)
+        code = launch.finish(timeout=120)
+    finally:
+        launch.cleanup()
+    assert code == 0, launch.output
     stamps = _stamps(bag)
     steps = set(range(0, 8_001, 10))
     ticks = set(range(0, 8_000, 50))
@@ -642,30 +656,24 @@ def test_a_recorder_behind_at_the_end_of_a_run_loses_nothing(ros: Any, tmp_path:
 
 
 @pytest.mark.slow
-def test_a_recorder_still_behind_when_the_nodes_give_up_fails_the_launch(
-        ros: Any, tmp_path: Path) -> None:
-    """The recorder stopped from the first tick of a 60 s lockstep run and resumed only
-    once every other node has exited (each gave up waiting for it): their last messages
-    are lost: the plant's 8 MB of samples overflow what a transport holds for a stopped
-    reader (a socket here: 4 MB at most). The launch exits 1 naming each node whose
-    final report is not in the bag, and ``tiltrov bag info`` says the same (before:
-    exit code 0, the bag silently short). What still waited in the recorder's buffers
-    when it resumed depends on the transport (a 30 s run was once received whole;
-    once every report but the allocator's, whose none had reached the bag and which
-    was then not named): each node is named exactly when the bag lacks its report."""
-    from tiltrov_ros.bag.losses import final_diagnostics
-
+def test_a_killed_recorder_ends_the_run_with_exit_1_naming_it(ros: Any,
+                                                               tmp_path: Path) -> None:
+    """kill -9 of the recorder mid-run (lockstep, paced by it): nothing waits for it any
+    more; the launch ends, exit 1, naming it (the bag is not whole)."""
     bag = tmp_path / 'bag'
-    code, output = _recorder_stopped(
-        ros, tmp_path, bag, ('--duration', '60'), _FIRST_TICK_ANSWERED,
-        lambda _, pids: not any(alive(pids[n]) for n in STACK), timeout=120.0)
-    assert code == 1, output
-    found = _loss_report(bag, output, _bag_info(bag))
-    reports = final_diagnostics(bag)[0]
-    for node in STACK:
-        line = f'/{node}: its final report is not in the bag'
-        final = reports.get(f'/{node}', {}).get(FINAL_STATUS_KEY) == 'true'
-        assert any(f.startswith(line) for f in found) != final, (node, found)
+    sim = _SimTime(ros.node('sim_time_probe'))
+    launch = LaunchProcess(tmp_path, '--duration', '600', *_WAIT_FOR_THE_TEST,
+                           '--record', str(bag))
+    try:
+        pids = launch.wait_running()
+        assert ros.spin_until(lambda: sim.reached(1.0), timeout=60.0), launch.output
+        os.kill(pids['bag_recorder'], signal.SIGKILL)
+        code = launch.finish(timeout=120)
+    finally:
+        launch.cleanup()
+    assert code == 1, launch.output
+    assert f'bag_recorder died (exit code {-signal.SIGKILL})' in launch.output
+    assert not any(alive(pid) for pid in pids.values())
 
 
 # --------------------------------------------------------------------------- smaller ones

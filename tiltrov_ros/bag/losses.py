@@ -23,7 +23,20 @@ import json
 from pathlib import Path
 from typing import Any
 
-from ..core.names import DIAGNOSTICS, FINAL_STATUS_KEY
+from ..core.names import (
+    CLOCK,
+    DIAGNOSTICS,
+    FINAL_STATUS_KEY,
+    JOINT_STATES,
+    ODOM,
+    SETPOINT,
+    SETPOINT_VELOCITY,
+    THRUST_CMD,
+    TILT_CMD,
+    WRENCH_ACHIEVED,
+    WRENCH_CMD,
+    join_namespace,
+)
 from .bagfile import bag_info, iter_raw
 from .msgdefs import typestore
 
@@ -125,3 +138,30 @@ def losses(bag: str | Path) -> Losses:
     found.unfinished = sorted(node for node in reporting
                               if last.get(node, {}).get(FINAL_STATUS_KEY) != 'true')
     return found
+
+
+#: The topics stamped at every plant step, and those stamped at every control tick.
+STEP_TOPICS = (ODOM, JOINT_STATES, CLOCK)
+TICK_TOPICS_RECORDED = (SETPOINT, SETPOINT_VELOCITY, WRENCH_CMD, THRUST_CMD, TILT_CMD,
+                        WRENCH_ACHIEVED)
+
+
+def missing_stamps(bag: str | Path, end_ns: int, step_ns: int, period_ns: int,
+                   namespace: str = '') -> dict[str, int]:
+    """Per topic of a lockstep run, how many stamps of its grid the bag lacks: every
+    step from 0 to ``end_ns`` on the plant's state, every tick before ``end_ns`` on the
+    control topics (a topic the bag does not have at all is skipped: e.g. no
+    ``setpoint_velocity`` from a reference that does not publish it)."""
+    from .cdr import leading_stamp_ns
+
+    info = bag_info(bag)
+    grids = {join_namespace(namespace, t): set(range(0, end_ns + 1, step_ns))
+             for t in STEP_TOPICS}
+    grids.update({join_namespace(namespace, t): set(range(0, end_ns, period_ns))
+                  for t in TICK_TOPICS_RECORDED})
+    grids = {t: g for t, g in grids.items() if t in info.topics}
+    for raw in iter_raw(bag, set(grids)):
+        stamp = leading_stamp_ns(raw.data, raw.msgtype)
+        if stamp is not None:
+            grids[raw.topic].discard(stamp)
+    return {t: len(g) for t, g in sorted(grids.items()) if g}

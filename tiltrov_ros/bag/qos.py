@@ -18,14 +18,17 @@ Choices (the same as rosbag2's recorder and player):
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 from rclpy.duration import Duration
 from rclpy.qos import (
     DurabilityPolicy,
     HistoryPolicy,
     LivelinessPolicy,
+    QoSCompatibility,
     QoSProfile,
     ReliabilityPolicy,
+    qos_check_compatible,
 )
 from rosbags.interfaces import (
     Qos,
@@ -129,3 +132,26 @@ def replay_qos(recorded: Sequence[Qos], depth: int = 1000) -> QoSProfile:
         durability = DurabilityPolicy.TRANSIENT_LOCAL
     return QoSProfile(reliability=reliability, durability=durability,
                       **_history(depth))
+
+
+def type_name(msg_type: Any) -> str:
+    """``nav_msgs/msg/Odometry`` of the class ``nav_msgs.msg.Odometry``."""
+    return f'{msg_type.__module__.split(".")[0]}/msg/{msg_type.__name__}'
+
+
+def unmatched(node: Any, endpoint: Any, *, publisher: bool) -> tuple[list[Any], int]:
+    """The opposite endpoints of ``endpoint`` (a publisher or a subscription of ``node``)
+    in ``node``'s graph that it can match (same type, compatible QoS), and how many of
+    them it has not matched yet, seen from its own side. The graph and the match come
+    from the same discovery data, so an endpoint in the graph and not matched is still
+    on its way."""
+    topic = endpoint.topic_name
+    infos = (node.get_subscriptions_info_by_topic(topic) if publisher
+             else node.get_publishers_info_by_topic(topic))
+    ours, kind = endpoint.qos_profile, type_name(endpoint.msg_type)
+    peers = [i for i in infos if i.topic_type == kind and qos_check_compatible(
+        *((ours, i.qos_profile) if publisher else (i.qos_profile, ours)))[0]
+        != QoSCompatibility.ERROR]
+    matched = (endpoint.get_subscription_count() if publisher
+               else endpoint.get_publisher_count())
+    return infos, max(len(peers) - matched, 0)

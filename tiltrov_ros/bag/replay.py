@@ -19,7 +19,7 @@ import time
 from typing import Any
 
 from tiltrov_ros.core.errors import BagError
-from tiltrov_ros.core.names import CLOCK, MATCH_SETTLE, join_namespace
+from tiltrov_ros.core.names import CLOCK, join_namespace
 from tiltrov_ros.core.timebase import ns_to_stamp, seconds, to_ns
 
 from .bagfile import BagInfo, RawMessage, bag_info, iter_raw
@@ -111,15 +111,21 @@ class Player:
             time.sleep(min(left, _MAX_SLEEP))
 
     def _wait_for_subscribers(self, should_stop: Callable[[], bool]) -> None:
+        """Wait (at most ``wait_for_subscribers`` s) until every topic has a reader and
+        every reader the player sees has matched it, on the player's side: a reader whose
+        own side lags behind may still miss the first messages (only it can see that)."""
+        from .qos import unmatched
+
         publishers = [*self.publishers.values(),
                       *([self._clock_pub] if self._clock_pub is not None else [])]
         if self.options.wait_for_subscribers <= 0:
             return
         deadline = time.monotonic() + self.options.wait_for_subscribers
         while (time.monotonic() < deadline and self._ok(should_stop)
-               and not all(p.get_subscription_count() > 0 for p in publishers)):
+               and not all(p.get_subscription_count() > 0
+                           and not unmatched(self.node, p, publisher=True)[1]
+                           for p in publishers)):
             time.sleep(0.01)
-        self._sleep_until(time.monotonic() + MATCH_SETTLE, should_stop)
 
     def _timed(self) -> Iterator[tuple[int, str, bytes]]:
         """(time, topic, payload) of the recorded messages, in the order to publish them.

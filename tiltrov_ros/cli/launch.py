@@ -62,6 +62,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         metavar='NODE',
                         help='start NODE again when its process dies mid-run '
                              f'({", ".join(RESPAWNABLE)}; repeatable)')
+    parser.add_argument('--join', action='append', default=[], metavar='NAME',
+                        help="a node outside the package that joins the run's handshake "
+                             '(tiltrov_ros.nodes.handshake.Handshake): the run starts once '
+                             'it has matched every node too (repeatable)')
 
 
 def options_from_args(args: argparse.Namespace) -> LaunchOptions:
@@ -71,7 +75,8 @@ def options_from_args(args: argparse.Namespace) -> LaunchOptions:
         real_time_factor=args.real_time_factor, record=args.record,
         single_process=args.single_process, namespace=args.namespace,
         params=tuple(args.param), stall_timeout=args.stall_timeout, executor=args.executor,
-        respawn=tuple(args.respawn), status_file=args.status_file, markers=args.markers)
+        respawn=tuple(args.respawn), status_file=args.status_file, markers=args.markers,
+        join=tuple(args.join))
 
 
 def run(args: argparse.Namespace) -> int:

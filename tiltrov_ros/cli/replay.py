@@ -18,7 +18,7 @@ from pathlib import Path
 from tiltrov_ros.bag.bagfile import bag_info
 from tiltrov_ros.bag.replay import Player, ReplayOptions, parse_remaps
 from tiltrov_ros.core.errors import BagError
-from tiltrov_ros.core.names import MATCH_SETTLE, normalize_namespace
+from tiltrov_ros.core.names import normalize_namespace
 
 from .output import print_written, report_errors
 
@@ -46,8 +46,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              'the recorder lagged, replays at its simulated pace (holds the '
                              'replayed messages in memory)')
     parser.add_argument('--wait-for-subscribers', type=float, default=1.0, metavar='SEC',
-                        help='wait up to SEC for every topic to have a subscriber, then '
-                             f'{MATCH_SETTLE} s for the matching to settle (default 1; 0: no wait)')
+                        help='wait up to SEC until every topic has a subscriber and every '
+                             'subscriber seen has matched the player (default 1; 0: no wait)')
     offline = parser.add_argument_group(
         'offline (no ROS)', 'replay through a part of the stack in this process instead')
     offline.add_argument('--through', choices=THROUGH, default=None,

@@ -71,6 +71,19 @@ FINAL_STATUS_KEY = 'final'
 BACKEND_KEY = 'backend'
 KERNEL_WARMUP_KEY = 'kernel_warmup_s'
 
+#: The run's handshake (nodes/handshake.py): each node's state, diagnostic_msgs/DiagnosticStatus,
+#: transient local. The recorder's progress in a paced lockstep run (rosgraph_msgs/Clock: the
+#: sim time up to which every paced topic is written). Neither is recorded; replay and
+#: analysis never see them.
+HANDSHAKE = 'handshake'
+RECORDER_PROGRESS = 'recorder_progress'
+HANDSHAKE_TOPICS: dict[str, str] = {HANDSHAKE: 'diagnostic_msgs/msg/DiagnosticStatus',
+                                    RECORDER_PROGRESS: 'rosgraph_msgs/msg/Clock'}
+#: The topics stamped with the control tick they answer or serve, published by the nodes
+#: other than the plant: a recorded lockstep run is paced on them and on ``/clock``.
+TICK_TOPICS = (SETPOINT_VELOCITY, SETPOINT, TILT_REQUEST, WRENCH_CMD, WRENCH_ACHIEVED,
+               TILT_CMD, THRUST_CMD)
+
 #: Every topic of the stack -> its ROS 2 type, in the order the stack publishes
 #: them within a step and a tick.
 STACK_TOPICS: dict[str, str] = {
@@ -133,13 +146,3 @@ def join_namespace(namespace: str, name: str) -> str:
         return name
     namespace = namespace.rstrip('/')
     return f'{namespace}/{name}' if namespace else f'/{name}'
-
-
-# --------------------------------------------------------------------------- DDS
-#: s (wall) a match seen from one end must hold before the first message goes: DDS
-#: matches a writer and a reader separately, and a volatile reader drops what a writer
-#: sends before the reader has matched it. The nodes' hold for the recorder, the
-#: plant's initial state and the player wait this long (0.25 s let a replay's first
-#: samples go to a reader not yet matched: they came in a burst 80 ms late; a restarted
-#: node's first answers were missing from the bag without it).
-MATCH_SETTLE = 0.5

@@ -7,10 +7,9 @@ tick the node answered; :class:`~tiltrov_ros.core.controllers.PIDController`):
 with ``gains.antiwindup`` > 0 its integral then holds still where that wrench
 fell short. The headless runner passes the same, one tick late, so a lockstep
 run stays equal to it: there, while the anti-windup is on, a pid tick waits
-for that answer as for its setpoint velocity, and after ``input_timeout``
-goes on without it (counted on ``/diagnostics``: ``achieved_timeouts``). The
-newest message by stamp is kept; a stamp going back (a restarted stack) is
-taken as it comes.
+for that answer as for its setpoint velocity, however long, when a node publishes
+it at the run's handshake (the controller decides once). The newest message by
+stamp is kept; a stamp going back (a restarted stack) is taken as it comes.
 """
 
 from __future__ import annotations
@@ -20,11 +19,10 @@ from typing import Any
 from geometry_msgs.msg import WrenchStamped
 
 from tiltrov_ros.core.names import FRAME_BODY, WRENCH_ACHIEVED
-from tiltrov_ros.core.timebase import format_ns
 from tiltrov_ros.core.validation import check_finite
 
 from .conversions import FloatArray, wrench_array
-from .guard import THROTTLE, input_callback
+from .guard import input_callback
 from .qos import RELIABLE_QOS
 
 
@@ -34,7 +32,6 @@ class AchievedInput:
 
     def init_achieved_input(self: Any) -> None:
         self._achieved: tuple[int, FloatArray] | None = None
-        self.achieved_timeouts = 0
         if self.kind == 'pid':
             self.create_input_subscription(WrenchStamped, WRENCH_ACHIEVED, self._on_achieved,
                                            RELIABLE_QOS)
@@ -53,14 +50,7 @@ class AchievedInput:
         got = self._achieved
         return got[1] if got is not None and got[0] == self._last_ns else None
 
-    def waits_for_achieved(self: Any, ns: int, timed_out: bool) -> bool:
-        """Lockstep: the pid's tick ``ns`` waits for the answer to the previous tick,
-        unless its inputs have ``timed_out`` (counted when that answer is missing)."""
-        missing = (getattr(self.controller, 'uses_achieved', False)
-                   and self._last_ns == ns - self.period_ns and self.achieved_of_last() is None)
-        if missing and timed_out:
-            self.achieved_timeouts += 1
-            self.get_logger().warning(f'no wrench_achieved stamped {format_ns(self._last_ns)}'
-                                      ': no anti-windup this tick',
-                                      throttle_duration_sec=THROTTLE)
-        return missing and not timed_out
+    def waits_for_achieved(self: Any, ns: int) -> bool:
+        """Lockstep: the pid's tick ``ns`` still waits for the answer to the previous tick."""
+        return bool(getattr(self.controller, 'uses_achieved', False)
+                    and self._last_ns == ns - self.period_ns and self.achieved_of_last() is None)

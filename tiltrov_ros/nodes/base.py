@@ -34,7 +34,7 @@ from tiltrov_ros.core.names import (
     DIAGNOSTICS,
     FINAL_STATUS_KEY,
     KERNEL_WARMUP_KEY,
-    MATCH_SETTLE,
+    RECORDER,
     join_namespace,
 )
 from tiltrov_ros.core.paramtable import Param, ParamTable
@@ -42,6 +42,7 @@ from tiltrov_ros.core.validation import InvalidInput
 
 from .conversions import Values, message_is_finite, set_stamp, stamp_ns
 from .guard import THROTTLE, InputGuard, guarded
+from .handshake import RECORDED_KEY, Handshake
 from .parameters import (
     Overrides,
     allowed_text,
@@ -58,23 +59,18 @@ from .simclock import install as install_time_source
 
 #: s (wall): period of the /diagnostics messages.
 DIAGNOSTICS_PERIOD = 1.0
-#: s (wall): how often a node that waits for the recorder checks the graph, and
-#: how long it waits at most before it publishes anyway (``wait_for_recorder``).
-RECORDER_POLL = 0.02
-RECORDER_WAIT = 10.0
-#: s (wall): how long a node that stops waits at most for its readers to acknowledge
-#: its last messages (below the launcher's SIGINT timeout, stack/supervisor.py). A
-#: reader that fell behind (the recorder on a loaded machine) asks for what it missed
-#: when the writer's next heartbeat comes, up to 3 s later (Fast DDS): a few of those.
-DELIVERY_WAIT = 10.0
 #: DiagnosticStatus levels as ints (the message field is a byte).
 OK, WARN, ERROR = 0, 1, 2
+#: s (wall): the longest a node started alone waits for its readers' acknowledgements as
+#: it stops (a bound against a hang; a node of a run waits for the recorder instead).
+DELIVERY_WAIT = 10.0
 
-#: ``wait_for_recorder`` (stack nodes; ``tiltrov launch --record`` sets it in lockstep).
-RECORDER_HOLD = ParamTable('recorder hold', [
-    Param('wait_for_recorder', 'str', '', 'name of the bag recorder node: publish nothing '
-          f'until it reads every topic of this node (at most {RECORDER_WAIT:g} s); empty: do '
-          'not wait. tiltrov launch --record sets it in lockstep.', read_only=True),
+#: ``run_nodes``: the names of the run's nodes, given by the launchers (nodes/handshake.py).
+RUN = ParamTable('run', [
+    Param('run_nodes', 'strs', (), "names of the run's nodes (the launchers set them): the "
+          'node joins the run\'s handshake and the plant starts once every one of them has '
+          'matched the others, seen from both sides; empty: the node runs alone, on its own '
+          'side of each match', read_only=True),
 ])
 
 
@@ -112,10 +108,7 @@ class SafePublisher:
         self._template = (template, values)
 
     def publish(self, msg: Any) -> bool:
-        """Publish ``msg`` if it is finite, else its safe replacement; True if ``msg`` went
-        (or is held until the recorder reads this topic, see ``wait_for_recorder``)."""
-        if self.node.hold_output(self, msg):
-            return True
+        """Publish ``msg`` if it is finite, else its safe replacement; True if ``msg`` went."""
         if self._template is not None and not isinstance(msg, bytes):
             template, read = self._template
             values = read(msg)
@@ -145,10 +138,7 @@ class SafePublisher:
             values = values.tolist()
         if not all(map(math.isfinite, values)):
             return self.publish(template.message(values, ns))
-        data = template.serialize(ns, values)
-        if self.node.hold_output(self, data):
-            return True
-        self.publisher.publish(data)
+        self.publisher.publish(template.serialize(ns, values))
         self.published += 1
         return True
 
@@ -177,8 +167,9 @@ class TiltrovNode(InputGuard, Node):
         Values that win over parameter files.
     """
 
-    #: The stack's nodes publish /diagnostics and may hold their outputs for the
-    #: recorder (:data:`RECORDER_HOLD`); the recorder itself does neither.
+    #: The stack's nodes run kernels, expect one /clock and report what they published
+    #: (the recorder does none of that; every node publishes /diagnostics and joins the
+    #: run's handshake).
     stack_node: ClassVar[bool] = True
     #: The node subscribes to /clock itself and rejects bad samples there (the time
     #: source then drops them without counting them a second time).
@@ -206,10 +197,10 @@ class TiltrovNode(InputGuard, Node):
         for line in misdirected_sections(self._source_args, self.get_fully_qualified_name()):
             self.get_logger().warning(line)
         self.callback_errors = 0
+        self.final_sent = False
         self.steady = steady_clock()
-        self._diagnostics_pub = (self.create_publisher(DiagnosticArray, DIAGNOSTICS,
-                                                       RELIABLE_QOS)
-                                 if self.stack_node else None)
+        self._diagnostics_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS,
+                                                      RELIABLE_QOS)
         self._diagnostics_msg = DiagnosticArray()
         self.init_input_guard()
         #: topic -> outgoing messages withheld for a non-finite value.
@@ -224,21 +215,9 @@ class TiltrovNode(InputGuard, Node):
         if self.stack_node and self.on_sim_time():
             self.expect_single_source(CLOCK)
         self.add_on_set_parameters_callback(self._refuse_fixed)
-        # Lockstep with a recorder (the launcher sets it with --record): hold this
-        # node's outputs, in order, until the recorder reads every one of its topics.
-        # The stack's writers are VOLATILE, so what goes out before the recorder has
-        # matched a writer is not recorded; a node started again mid-run (--respawn)
-        # is otherwise discovered by the plant first and by the recorder up to
-        # seconds later (no multicast), while lockstep runs on.
-        self.recorder_node = (str(declare(self, RECORDER_HOLD)['wait_for_recorder'])
-                              if self.stack_node else '')
-        self._held: list[tuple[SafePublisher, Any]] = []
-        self._holding = bool(self.recorder_node)
-        self._hold_since = time.monotonic()
-        self._matched_since: float | None = None
-        self._hold_timer = (self.create_timer(RECORDER_POLL, self._check_recorder,
-                                              clock=self.steady)
-                            if self._holding else None)
+        #: The run's handshake (nodes/handshake.py); joined by :meth:`join_run`.
+        self.handshake = Handshake(self, declare(self, RUN)['run_nodes'],
+                                   on_change=self.on_handshake)
 
     def declare_parameter(self, name: str, value: Any = None,
                           descriptor: ParameterDescriptor | None = None,
@@ -299,55 +278,6 @@ class TiltrovNode(InputGuard, Node):
         self._safe_publishers.append(pub)
         return pub
 
-    def hold_output(self, publisher: SafePublisher, msg: Any) -> bool:
-        """Keep ``msg`` for later while waiting for the recorder; True if kept."""
-        if self._holding:
-            self._held.append((publisher, msg))
-        return self._holding
-
-    def recorder_reads_every_topic(self) -> bool:
-        """The recorder's subscription is in the graph on every guarded topic of this
-        node, and every subscription there is matched with this node's writer."""
-        for pub in self._safe_publishers:
-            infos = self.get_subscriptions_info_by_topic(pub.publisher.topic_name)
-            if not any(info.node_name == self.recorder_node for info in infos):
-                return False
-            if pub.get_subscription_count() < len(infos):
-                return False
-        return True
-
-    def _check_recorder(self) -> None:
-        now = time.monotonic()
-        waited = now - self._hold_since
-        # The match seen from this node is the writer's side; the recorder's reader
-        # matches the writer when its own discovery gets there, and a volatile reader
-        # drops what came before that. A restarted node saw its side first and lost the
-        # recorder its first answers (the killed-node test, 3 of 6 suites on the faster
-        # stack): the match must hold for MATCH_SETTLE before the outputs go.
-        if not self.recorder_reads_every_topic():
-            self._matched_since = None
-        elif self._matched_since is None:
-            self._matched_since = now
-        ready = self._matched_since is not None and now - self._matched_since >= MATCH_SETTLE
-        if not ready and waited < RECORDER_WAIT:
-            return
-        if self._hold_timer is not None:
-            self._hold_timer.cancel()
-            self.destroy_timer(self._hold_timer)
-            self._hold_timer = None
-        self._holding = False
-        held, self._held = self._held, []
-        if ready:
-            self.get_logger().info(f'{self.recorder_node} reads every topic of this node '
-                                   f'after {waited:.2f} s; publishing {len(held)} held '
-                                   'messages')
-        else:
-            self.get_logger().warning(f'{self.recorder_node} does not read every topic of '
-                                      f'this node after {waited:.0f} s; publishing anyway '
-                                      f'({len(held)} held messages)')
-        for pub, msg in held:
-            pub.publish(msg)
-
     def unsafe_output(self, topic: str) -> None:
         """Count and log an outgoing message withheld for a non-finite value."""
         self.unsafe[topic] += 1
@@ -355,17 +285,30 @@ class TiltrovNode(InputGuard, Node):
                                 f'({self.unsafe[topic]} so far); publishing the safe command',
                                 throttle_duration_sec=THROTTLE)
 
+    def recorded_by_the_run(self) -> bool:
+        """True once nothing this node published can still be lost for the run's bag: the
+        run's recorder says it has written this node's final report and every message
+        that report counts (its handshake state names this node's instance under
+        ``recorded``), or it is gone, or the run has none (no run nodes: see
+        :meth:`wait_for_delivery`)."""
+        hs = self.handshake
+        if not hs.active or RECORDER not in hs.run_nodes or self.get_name() == RECORDER:
+            return True
+        state = hs.state_of(RECORDER)
+        if state is not None and f'{self.get_name()}={hs.instance}' in state.extra.get(
+                RECORDED_KEY, '').split():
+            return True
+        return (RECORDER, self.get_namespace()) not in self.get_node_names_and_namespaces()
+
     def wait_for_delivery(self, timeout: float = DELIVERY_WAIT) -> bool:
-        """Wait (at most ``timeout`` wall seconds in all) until every reliable reader has
-        acknowledged every message this node published (its guarded publishers and
-        /diagnostics). Called before the node's writers are destroyed: a writer's
-        unacknowledged samples go with it, so a reader that lags (the bag recorder on
-        a loaded machine) would lose the last ones."""
+        """A node without run nodes: wait (at most ``timeout`` wall seconds in all, against
+        a hang) until every reliable reader has acknowledged every message this node
+        published, so that a lagging reader (a recorder started by hand) loses none of
+        the last ones when the writers go."""
         deadline = time.monotonic() + timeout
         acked = True
         publishers = [p.publisher for p in self._safe_publishers]
-        if self._diagnostics_pub is not None:
-            publishers.append(self._diagnostics_pub)
+        publishers.append(self._diagnostics_pub)
         for pub in publishers:
             left = max(deadline - time.monotonic(), 0.0)
             acked = bool(pub.wait_for_all_acked(Duration(seconds=left))) and acked
@@ -377,9 +320,21 @@ class TiltrovNode(InputGuard, Node):
 
     # -- helpers ----------------------------------------------------------------
 
-    def start_diagnostics(self) -> None:
-        """Publish /diagnostics every DIAGNOSTICS_PERIOD wall seconds (call last in __init__)."""
-        self.create_timer(DIAGNOSTICS_PERIOD, self.publish_diagnostics, clock=self.steady)
+    def join_run(self) -> None:
+        """Publish /diagnostics every DIAGNOSTICS_PERIOD wall seconds and join the run's
+        handshake (call last in ``__init__``: every endpoint of the node exists)."""
+        self._diagnostics_timer = self.create_timer(DIAGNOSTICS_PERIOD, self.publish_diagnostics,
+                                                    clock=self.steady)
+        self.handshake.start()
+        if self.handshake.active:
+            self.get_logger().info(f'run of {", ".join(self.handshake.run_nodes)}: waiting '
+                                   'until each of them has matched the others')
+        else:
+            self.get_logger().info('started alone (no run_nodes): waiting on its own side '
+                                   'of each match only')
+
+    def on_handshake(self) -> None:
+        """Called when what this node knows of the run's handshake changed."""
 
     def steady_ns(self) -> int:
         return int(self.steady.now().nanoseconds)
@@ -409,7 +364,13 @@ class TiltrovNode(InputGuard, Node):
     def publish_diagnostics(self, final: bool = False) -> None:
         """Publish this node's status; ``final``: the last one, sent as the node stops
         (``final: true``): a recording of the whole run that lacks it may have lost the
-        node's last messages (bag/losses.py)."""
+        node's last messages (bag/losses.py). Nothing follows the final one."""
+        if self.final_sent:
+            return
+        if final:
+            self.final_sent = True
+            if getattr(self, '_diagnostics_timer', None) is not None:
+                self._diagnostics_timer.cancel()
         level, message, values = self.diagnostic_status()
         for topic, names in self.extra_sources().items():
             level = max(level, WARN)
@@ -428,7 +389,13 @@ class TiltrovNode(InputGuard, Node):
             message = f'{message}; {self.callback_errors} callback error(s)'
         if unsafe:
             message = f'{message}; {unsafe} non-finite output(s) withheld'
-        values = {**values, 'callback_errors': self.callback_errors,
+        if not self.handshake.ready:
+            level = max(level, WARN)
+            message = f'{message}; waiting for {self.handshake.waiting_for}'
+        values = {**values, 'instance': self.handshake.instance,
+                  'handshake': self.handshake.ready,
+                  'waiting_for': values.get('waiting_for') or self.handshake.waiting_for,
+                  'callback_errors': self.callback_errors,
                   'rejected_messages': rejected, BACKEND_KEY: jit.backend(),
                   KERNEL_WARMUP_KEY: self.kernel_warmup}
         if self.on_sim_time():

@@ -127,6 +127,9 @@ def spin_until(executor: Executor, context: Context, future: Future | None = Non
 
 #: s (wall): the longest a stop signal waits for the spin to notice it.
 STOP_POLL = 0.2
+#: s (wall): how often a stopping node looks whether the recorder is gone (its reports
+#: wake it at once).
+FINISH_POLL = 0.05
 
 
 def main_loop(factory: Callable[[], TiltrovNode], args: list[str] | None, name: str, *,
@@ -136,12 +139,12 @@ def main_loop(factory: Callable[[], TiltrovNode], args: list[str] | None, name: 
     ``until`` returns a future that ends the spin when done (the plant's end of
     run). The run also ends on SIGINT or SIGTERM (Ctrl-C, the launcher). Either
     way the node then publishes its final /diagnostics (its message counts) and
-    waits until its readers acknowledged everything it published
-    (:meth:`~tiltrov_ros.nodes.base.TiltrovNode.wait_for_delivery`) before its
-    writers go: a lagging reader (the recorder) loses nothing. Exit code 0. A
-    second signal while the node ends (Ctrl-C in a terminal reaches every process
-    of ``ros2 launch``, and launch sends its own SIGINT too) changes nothing: no
-    KeyboardInterrupt, no death by signal.
+    spins on until nothing it published can still be lost: in a run with a recorder,
+    until the recorder says it has written the final report and every message the
+    report counts, or is gone (:meth:`~tiltrov_ros.nodes.base.TiltrovNode.recorded_by_the_run`);
+    a node started alone waits for its readers' acknowledgements
+    (:meth:`~tiltrov_ros.nodes.base.TiltrovNode.wait_for_delivery`). A second signal
+    ends that wait at once. Exit code 0; no KeyboardInterrupt, no death by signal.
 
     A start-up error (an unreadable parameter file, an invalid parameter, a
     wrong-type YAML value) is printed as one line naming the node and gives exit
@@ -150,9 +153,10 @@ def main_loop(factory: Callable[[], TiltrovNode], args: list[str] | None, name: 
     if not init(args, name, signal_handlers=False):
         return 1
     stop = threading.Event()
+    hurry = threading.Event()
 
     def on_signal(signum: int, frame: object) -> None:
-        stop.set()
+        (hurry if stop.is_set() else stop).set()
 
     previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     context = rclpy.get_default_context()
@@ -170,7 +174,7 @@ def main_loop(factory: Callable[[], TiltrovNode], args: list[str] | None, name: 
         spin_until(executor, context, future if future is not None else Future(),
                    step=STOP_POLL, stop=stop)
         node.publish_diagnostics(final=True)     # the final counts, for the recorder
-        node.wait_for_delivery()
+        finish(node, executor, context, hurry)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except STARTUP_ERRORS as exc:
@@ -195,3 +199,15 @@ def main_loop(factory: Callable[[], TiltrovNode], args: list[str] | None, name: 
                 signal.signal(sig, handler)
     return code
 
+
+def finish(node: TiltrovNode, executor: Executor, context: Context,
+           hurry: threading.Event) -> None:
+    """After the final report: spin until the run's recorder has everything this node
+    published, or is gone, or ``hurry`` is set (a node without run nodes waits for its
+    readers' acknowledgements instead)."""
+    if not node.handshake.active:
+        node.wait_for_delivery()
+        return
+    done = Future()
+    while context.ok() and not hurry.is_set() and not node.recorded_by_the_run():
+        executor.spin_until_future_complete(done, timeout_sec=FINISH_POLL)

@@ -22,6 +22,7 @@ cost lockstep more than building 17 markers ten times per simulated second
 
 from __future__ import annotations
 
+from collections.abc import Callable
 import functools
 from typing import Any
 
@@ -31,6 +32,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from tiltrov_ros.core.names import FRAME_EARTH, ROBOT_MARKERS, WRENCH_ACHIEVED, WRENCH_CMD
 from tiltrov_ros.core.plant import PlantSample
+from tiltrov_ros.core.timebase import cdr_stamp_ns
 from tiltrov_ros.core.validation import InvalidInput, check_finite
 from tiltrov_ros.core.visual import (
     HULL_RGBA,
@@ -143,12 +145,31 @@ class RobotMarkers:
         self._last_ns = -1
         self._wrenches = {WRENCH_CMD: np.zeros(6), WRENCH_ACHIEVED: np.zeros(6)}
         self._latest: dict[str, bytes] = {}
-        for topic in self._wrenches:
-            node.create_subscription(WrenchStamped, topic, functools.partial(self._keep, topic),
+        #: Lockstep (set by the plant at the start): each tick's wrenches come through
+        #: ``on_wrench`` and the plant hands the tick's pair over (:meth:`use`) when it
+        #: applies the tick's commands; otherwise the latest received are drawn.
+        self.by_stamp = False
+        self.on_wrench: Callable[[int, int, bytes], None] | None = None
+        for slot, topic in enumerate(self._wrenches, start=2):
+            node.create_subscription(WrenchStamped, topic,
+                                     functools.partial(self._keep, topic, slot),
                                      RELIABLE_QOS, raw=True)
 
-    def _keep(self, topic: str, data: bytes) -> None:
+    def _keep(self, topic: str, slot: int, data: bytes) -> None:
+        if self.by_stamp and self.on_wrench is not None:
+            try:
+                stamp = cdr_stamp_ns(data)
+            except ValueError:
+                self.node.reject_malformed(topic, WrenchStamped, data)
+                return
+            self.on_wrench(stamp, slot, data)
+            return
         self._latest[topic] = data
+
+    def use(self, wrench: bytes, achieved: bytes) -> None:
+        """Draw these wrenches (those stamped with the tick whose commands are in force)
+        from now on."""
+        self._latest = {WRENCH_CMD: wrench, WRENCH_ACHIEVED: achieved}
 
     def due(self, ns: int) -> bool:
         """Markers are due at ``ns`` (a multiple of the period, not yet published)."""

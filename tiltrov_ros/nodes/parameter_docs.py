@@ -30,7 +30,7 @@ from tiltrov_ros.core.params import ROBOT, STACK
 from tiltrov_ros.core.paramtable import ParamTable
 from tiltrov_ros.core.validation import FAILED_THRUSTERS
 
-from .base import RECORDER_HOLD
+from .base import RUN
 from .guard import STAMP_BOUNDS
 from .parameters import robot_defaults
 from .plant_config import PLANT_PARAMS
@@ -57,13 +57,13 @@ class NodeParameters:
 _ROBOT = (ROBOT, STACK)
 NODES = (
     NodeParameters(PLANT, (PLANT_PARAMS, FAILED_THRUSTERS),
-                   (STAMP_BOUNDS, RECORDER_HOLD, *_ROBOT)),
+                   (STAMP_BOUNDS, RUN, *_ROBOT)),
     NodeParameters(CONTROLLER, (CONTROL_LAW, CONTROLLER_PARAMS, GAINS, SWITCHING),
-                   (STAMP_BOUNDS, RECORDER_HOLD, *_ROBOT)),
+                   (STAMP_BOUNDS, RUN, *_ROBOT)),
     NodeParameters(ALLOCATOR, (ALLOCATION, ALLOCATOR_PARAMS, FAILED_THRUSTERS),
-                   (STAMP_BOUNDS, RECORDER_HOLD, *_ROBOT)),
-    NodeParameters(REFERENCE, (REFERENCE_PARAMS,), (RECORDER_HOLD, *_ROBOT)),
-    NodeParameters(RECORDER, (RECORDER_PARAMS,), ()),
+                   (STAMP_BOUNDS, RUN, *_ROBOT)),
+    NodeParameters(REFERENCE, (REFERENCE_PARAMS,), (RUN, *_ROBOT)),
+    NodeParameters(RECORDER, (RECORDER_PARAMS,), (RUN,)),
 )
 
 _INTRO = """\

@@ -44,14 +44,15 @@ PLANT_PARAMS = ParamTable('plant_simulator', [
     Param('exit_at_end', 'bool', False, 'exit the process (code 0) when duration is reached, '
           'once every reader acknowledged the last messages', read_only=True),
     Param('stall_timeout', 'float', 1.0, 'lockstep: wall seconds without the commands of a '
-          "tick before a stall is reported and the tick's state published again", 's',
-          low=0.01, high=3600.0),
-    Param('startup_subscribers', 'int', 1, 'odom readers to wait for before publishing the '
-          'initial state (realtime: before time starts); 0: start at once', low=0, high=1000,
-          read_only=True),
-    Param('startup_delay', 'float', 0.0, 'wall seconds to wait once the readers are there, so '
-          'that every other pair of endpoints (e.g. a bag recorder and the allocator) is '
-          'matched too', 's', low=0.0, high=60.0, read_only=True),
+          'tick before the wait is reported as a stall (log, /diagnostics); it changes '
+          'nothing else', 's', low=0.01, high=3600.0),
+    Param('startup_subscribers', 'int', 1, 'odom readers to wait for (on the plant\'s side) '
+          'before publishing the initial state (realtime: before time starts), besides the '
+          'run\'s handshake; 0: none', low=0, high=1000, read_only=True),
+    Param('recorder_window', 'float', 1.0, 'lockstep with the bag recorder among run_nodes: '
+          'the plant steps past a control tick only while it is at most this far ahead of '
+          'what the recorder has written of /clock and the tick topics (0: every tick waits '
+          'until its commands are written)', 's', low=0.0, high=3600.0, read_only=True),
     Param('command_timeout', 'float', 0.5, 'realtime: sim seconds without a thrust_cmd after '
           'which the thrusters are commanded to zero (tilts held) until commands return; '
           '0: off', 's', low=0.0, high=3600.0),
@@ -89,7 +90,7 @@ class PlantConfig:
     exit_at_end: bool
     stall_timeout: float             # s, wall
     startup_subscribers: int
-    startup_delay: float             # s, wall
+    recorder_window_ns: int          # sim ns; pacing when the recorder is a run node
     command_timeout: float = 0.5     # s, sim time; 0: off
     markers_period_ns: int = 0                      # robot_markers; 0: none
     marker_scales: Scales = field(default_factory=Scales)
@@ -141,7 +142,7 @@ def declare_parameters(node: TiltrovNode) -> PlantConfig:
         initial_state=scenario.initial_state if scenario is not None else InitialState(),
         scenario=v['scenario'], duration_ns=duration_ns, exit_at_end=v['exit_at_end'],
         stall_timeout=v['stall_timeout'], startup_subscribers=v['startup_subscribers'],
-        startup_delay=v['startup_delay'], command_timeout=v['command_timeout'],
+        recorder_window_ns=to_ns(v['recorder_window']), command_timeout=v['command_timeout'],
         markers_period_ns=markers_ns, marker_scales=Scales(*v['marker_scales']),
         tf=v['tf'], tf_thrusters=v['tf_thrusters'],
         failed_thrusters=failed, faults=scenario.faults if scenario is not None else ())

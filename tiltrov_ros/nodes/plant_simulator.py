@@ -14,28 +14,12 @@ allocator has the measured tilts at t_i before the wrench that answers the
 
 Modes (parameter ``mode``):
 
-* ``lockstep``: as fast as possible and deterministic. The plant steps freely
-  between control ticks; at a tick t_i (a multiple of ``control_period``) it
-  does not step until it holds a ``thrust_cmd`` *and* a ``tilt_cmd`` stamped
-  t_i, which it applies before stepping (zero-order hold until the next
-  tick), exactly as :func:`tiltrov_ros.core.runner.run` does. Before the
-  initial state it waits until ``startup_subscribers`` readers are matched on
-  ``odom`` and a publisher on each command topic, then ``startup_delay``
-  wall seconds more, and until the readers of the state have not changed for
-  ``MATCH_SETTLE`` (0.5 s). If the commands of a tick
-  have not come after ``stall_timeout`` wall seconds, the wait is reported on
-  ``/diagnostics`` as a stall and the state at t_i (joint_states, odom, clock)
-  is published again, so a lost message or a restarted controller resumes the
-  run; every node of the stack answers a repeated stamp idempotently. The
-  initial state is published again only for a reader matched after it went
-  out (a late reader cannot have it): the first answer may be slow (a node
-  holds its outputs until the bag recorder reads them, up to
-  ``RECORDER_WAIT``), and a state published twice is recorded twice. Only a
-  start-up longer than ``RECORDER_WAIT`` + ``stall_timeout`` is a stall.
+* ``lockstep``: as fast as possible and deterministic: at each control tick the
+  plant waits for the commands stamped with it (nodes/plant_lockstep.py: the start on
+  the run's handshake, the ticks, restarts, the recorder's pacing, stalls).
 * ``realtime``: a wall-clock timer steps the plant ``real_time_factor`` times
   faster than real time; the latest command (by stamp) is in force. Time
-  starts once ``startup_subscribers`` readers are matched on ``odom`` (0: at
-  once), so a controller started with the plant is there from t = 0.
+  starts as lockstep's initial state goes out (the handshake, ``startup_subscribers``).
 
 In both modes a command stamped more than one plant step after the plant's
 time is rejected (``future_stamp``): it answers no state yet published, and,
@@ -65,7 +49,6 @@ from tiltrov_ros.core.names import (
     CLOCK,
     JOINT_STATES,
     LOCKSTEP,
-    MATCH_SETTLE,
     ODOM,
     PLANT,
     THRUST_CMD,
@@ -82,7 +65,7 @@ from tiltrov_ros.core.validation import (
     failed_thruster_indices,
 )
 
-from .base import OK, RECORDER_WAIT, WARN, TiltrovNode
+from .base import OK, WARN, TiltrovNode
 from .conversions import (
     fill_joint_state,
     fill_odometry,
@@ -96,6 +79,7 @@ from .guard import THROTTLE, guarded, input_callback
 from .markers import RobotMarkers
 from .parameters import Overrides
 from .plant_config import declare_parameters
+from .plant_lockstep import REJECTED, Lockstep
 from .qos import RELIABLE_QOS, STATE_QOS
 from .serialized import SerializedTemplate
 from .transforms import robot_transforms
@@ -103,18 +87,8 @@ from .transforms import robot_transforms
 #: joint_states value of a field a joint does not have (thruster position and
 #: velocity, servo effort): 0.0, since no topic carries NaN (docs/reliability.md).
 NO_VALUE = 0.0
-#: s (wall): how often the lockstep watchdog looks at the start-up and stall state.
-WATCHDOG_PERIOD = 0.05
-#: s (wall): how often the plant looks for readers matched after the initial state went
-#: out, until the first commands come (such a reader gets the initial state again).
-STARTUP_RETRY = 0.25
 #: Most plant steps one realtime timer callback catches up before it re-bases.
 MAX_CATCH_UP = 100
-#: lockstep: most ticks with commands held before their time (only the present one is
-#: legitimate; the cap keeps a misbehaving publisher from growing the table).
-MAX_PENDING = 100
-#: Marks a command that was received for a tick but rejected (held: previous stays).
-_REJECTED: list[float] = []
 #: The numbers of joint_states (position, velocity, effort of TILTS + THRUSTERS) and of
 #: odom (position, quaternion, nu) in the templates' order.
 _JOINT_VALUES = 3 * len(TILTS + THRUSTERS)
@@ -140,7 +114,7 @@ def _odom_message(values: Any, ns: int) -> Odometry:
     return fill_odometry(new_odometry(), ns, values[0:3], values[3:7], values[7:13])
 
 
-class PlantSimulator(TiltrovNode):
+class PlantSimulator(Lockstep, TiltrovNode):
     """The simulated robot (see the module docstring)."""
 
     kernel_groups = ('plant', 'visual')     # the step; robot_markers' scene
@@ -178,38 +152,22 @@ class PlantSimulator(TiltrovNode):
                                            RELIABLE_QOS),
             self.create_input_subscription(JointState, TILT_CMD, self._on_tilt_cmd,
                                            RELIABLE_QOS))
-        #: readers matched on odom, joint_states, /clock when the initial state went out
-        self._initial_readers: tuple[int, ...] = ()
-        self._settled_readers: tuple[int, ...] = ()    # and since when (steady ns)
-        self._settled_since = 0
-
-        # lockstep: tick ns -> [thrusts, tilts] (None: not yet; _REJECTED: bad message)
-        self._pending: dict[int, list[list[float] | None]] = {}
-        self._started = False
-        self._started_at = 0                       # steady ns of the initial state
-        self._peers_since: int | None = None       # steady ns when the peers were there
-        self._commands_seen = False
-        self._waiting_since: int | None = None     # steady ns, while waiting at a tick
-        self._stalled = False                      # the present wait is a stall
+        self.init_lockstep()
+        if self.markers is not None:
+            self.markers.on_wrench = self._on_marker_wrench
         self._last_applied = [-1, -1]              # realtime: stamps of the held commands
         self._last_thrust_at: int | None = None    # realtime: sim ns of the last thrust_cmd
         self.commands_stale = False
         self.stale_events = 0
         self._update_failed()
-        self.stalls = 0
-        self.last_stall_ns: int | None = None     # the tick of the latest stall
-        self.startup_retries = 0
-        self.republished = 0
         self.overruns = 0
         self._diag_mark = (self.steady_ns(), self.plant.time_ns)
         self._rtf_achieved = 0.0
 
         self._step_timer = None
-        self._watchdog_timer = self.create_timer(WATCHDOG_PERIOD, self._watchdog,
-                                                 clock=self.steady)
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
-        self.start_diagnostics()
+        self.join_run()
         c = self.config
         self.get_logger().info(
             f'{c.mode}{"" if self.lockstep else f" x{c.real_time_factor:g}"}, scenario '
@@ -223,6 +181,7 @@ class PlantSimulator(TiltrovNode):
         """``/clock``, ``joint_states``, then ``odom`` (see the module docstring)."""
         s = self.plant.sample()
         ns = s.t_ns
+        self._published_generation = self.handshake.generation
         self._clock_pub.publish_serialized(self._clock_bytes, ns, ())
         self._joint_pub.publish_serialized(
             self._joint_bytes, ns, (*s.tilts, *_NO_THRUSTER_VALUES, *s.tilt_velocities,
@@ -241,7 +200,7 @@ class PlantSimulator(TiltrovNode):
 
     def _finish(self) -> None:
         if not self.finished.done():
-            self._waiting_since = None
+            self._end_wait()
             t = self.plant.time_ns
             wall = seconds(self.steady_ns() - self._started_at)
             self.get_logger().info(
@@ -269,7 +228,6 @@ class PlantSimulator(TiltrovNode):
 
     def _on_command(self, kind: int, msg: JointState, names: tuple[str, ...],
                     field: str) -> None:
-        self._commands_seen = True
         stamp = msg.header.stamp
         if self.lockstep and (checked_stamp_ns(stamp.sec, stamp.nanosec) < self.plant.time_ns
                               or self.finished.done()):
@@ -288,16 +246,12 @@ class PlantSimulator(TiltrovNode):
                         self.get_logger().info(f'thrust_cmd again (stamped {format_ns(ns)}): '
                                                'commands resume')
             return
-        self._hold(ns, kind, values)
+        self.hold(ns, kind, values)
 
-    def _hold(self, ns: int, kind: int, values: list[float]) -> None:
-        """lockstep: keep the command for tick ``ns`` (``_REJECTED``: answered, but the
-        previous command holds) and advance if the present tick is complete."""
-        entry = self._pending.setdefault(ns, [None, None])
-        entry[kind] = values
-        if len(self._pending) > MAX_PENDING:     # commands for ticks far ahead: nonsense
-            del self._pending[max(self._pending)]
-        self._advance()
+    def _on_marker_wrench(self, ns: int, slot: int, data: bytes) -> None:
+        """lockstep: a wrench the markers draw, kept for its tick (an old one is dropped)."""
+        if ns >= self.plant.time_ns and not self.finished.done():
+            self.hold(ns, slot, data)
 
     def on_rejected(self, topic: str, bad: InvalidInput, stamp: int | None) -> None:
         """A rejected command leaves the previous one in force. In lockstep one stamped
@@ -310,7 +264,7 @@ class PlantSimulator(TiltrovNode):
         kind = 0 if topic == THRUST_CMD else 1
         entry = self._pending.get(stamp)
         if entry is None or entry[kind] is None:
-            self._hold(stamp, kind, _REJECTED)
+            self.hold(stamp, kind, REJECTED)
 
     def _command(self, kind: int, values: list[float]) -> None:
         if kind == 0:
@@ -318,33 +272,7 @@ class PlantSimulator(TiltrovNode):
         else:
             self.plant.command(tilts=values)
 
-    # -- lockstep --------------------------------------------------------------------
-
-    def _advance(self) -> None:
-        """Step until a control tick whose commands are missing (or the end)."""
-        if not self._started:
-            return
-        plant = self.plant
-        period = self.config.control_period_ns
-        while True:
-            if self._reached_end():
-                self._finish()
-                return
-            t = plant.time_ns
-            if t % period == 0:
-                entry = self._pending.get(t)
-                if entry is None or entry[0] is None or entry[1] is None:
-                    if self._waiting_since is None:
-                        self._waiting_since = self.steady_ns()
-                    return
-                for kind, values in enumerate(entry):
-                    if values:      # None was excluded above; _REJECTED is empty
-                        self._command(kind, values)
-                for stamp in [s for s in self._pending if s <= t]:
-                    del self._pending[stamp]
-                self._waiting_since = None
-                self._stalled = False
-            self._step()
+    # -- stepping --------------------------------------------------------------------
 
     def _step(self) -> None:
         """One plant step (the scenario's faults applied first), then the state out."""
@@ -378,82 +306,6 @@ class PlantSimulator(TiltrovNode):
             f'(command_timeout {timeout:g} s): thrusters commanded to zero until commands '
             'return')
 
-    @guarded
-    def _watchdog(self) -> None:
-        if not self._started:
-            if not self._peers_ready():
-                self._peers_since = None
-                return
-            now = self.steady_ns()
-            if self._peers_since is None:
-                self._peers_since = now
-            if seconds(now - self._peers_since) < self.config.startup_delay:
-                return
-            if not self.lockstep:
-                self.destroy_timer(self._watchdog_timer)
-                self._start_realtime()
-                return
-            # A match the plant sees is its writer's side: a reader matched a moment ago
-            # may not have matched back and would drop the initial state, unseen (the
-            # reference's /clock reader once: the run waited 10 s at t = 0). The state's
-            # readers must have stayed the same for MATCH_SETTLE.
-            readers = self._state_readers()
-            if readers != self._settled_readers:
-                self._settled_readers, self._settled_since = readers, now
-            if seconds(now - self._settled_since) < MATCH_SETTLE:
-                return
-            self._started = True
-            self._started_at = now
-            self._initial_readers = readers
-            self._publish_state()
-            self._advance()
-            return
-        since = self._waiting_since
-        if since is None or self.finished.done():
-            return
-        waited = seconds(self.steady_ns() - since)
-        t = self.plant.time_ns
-        if not self._commands_seen:
-            # Start-up: only a reader matched after the initial state went out misses it.
-            # The others have it (reliable) and may answer late: a node holds its outputs
-            # until the recorder reads them (RECORDER_WAIT at most).
-            readers = self._state_readers()
-            if waited >= STARTUP_RETRY and any(
-                    n > n0 for n, n0 in zip(readers, self._initial_readers)):
-                self.startup_retries += 1
-                self._initial_readers = readers
-                self._republish()
-            if waited < RECORDER_WAIT + self.config.stall_timeout:
-                return
-        if waited >= self.config.stall_timeout:
-            self.stalls += 1
-            self._stalled = True
-            entry = self._pending.get(t, [None, None])
-            missing = [name for name, got in zip((THRUST_CMD, TILT_CMD), entry) if got is None]
-            text = (f'stall at {format_ns(t)}: no {" and ".join(missing)} stamped with it '
-                    f'after {waited:.2f} s; publishing the state at {format_ns(t)} again')
-            # The first stall at a tick is always told (a kill right after a slow start
-            # stalls a new tick within the throttle); its repeats are throttled.
-            if self.last_stall_ns != t:
-                self.last_stall_ns = t
-                self.get_logger().warning(text)
-            else:
-                self.get_logger().warning(text, throttle_duration_sec=THROTTLE)
-            self._republish()
-
-    def _republish(self) -> None:
-        self.republished += 1
-        self._waiting_since = self.steady_ns()
-        self._publish_state()
-
-    def _peers_ready(self) -> bool:
-        """lockstep: the odom readers and both command publishers matched; realtime: the
-        readers."""
-        if self._odom_pub.get_subscription_count() < self.config.startup_subscribers:
-            return False
-        return not self.lockstep or all(sub.get_publisher_count() > 0
-                                        for sub in self._command_subs)
-
     def _state_readers(self) -> tuple[int, ...]:
         """Readers matched on each writer of the state (odom, joint_states, /clock, /tf)."""
         pubs = (self._odom_pub, self._joint_pub, self._clock_pub)
@@ -463,8 +315,6 @@ class PlantSimulator(TiltrovNode):
     # -- realtime --------------------------------------------------------------------
 
     def _start_realtime(self) -> None:
-        self._started = True
-        self._started_at = self.steady_ns()
         self._publish_state()
         self._rebase()
         self._make_step_timer()
@@ -532,13 +382,16 @@ class PlantSimulator(TiltrovNode):
             self._rtf_achieved = (t - sim0) / (now - wall0)
         self._diag_mark = (now, t)
         level, message = OK, f'{self.config.mode} at {format_ns(t)}'
+        lockstep = self.lockstep_status()
         if not self._started:
-            message = f'{self.config.mode}: waiting for the controller and allocator'
+            message = f'{self.config.mode}: waiting for {lockstep["waiting_for"]}'
         elif self.finished.done():
             message = f'finished at {format_ns(t)}'
         elif self._stalled:
             level = WARN
             message = f'stalled at {format_ns(t)}: waiting for thrust_cmd/tilt_cmd'
+        elif lockstep['waiting_for_recorder']:
+            message = f'waiting at {format_ns(t)} for the bag recorder (paced)'
         elif self.commands_stale:
             level = WARN
             message = (f'no thrust_cmd for more than command_timeout '
@@ -548,10 +401,8 @@ class PlantSimulator(TiltrovNode):
         plant = self.plant
         return level, message, {
             'mode': self.config.mode, 'sim_time': seconds(t),
-            'real_time_factor_achieved': self._rtf_achieved,
-            'stalls': self.stalls, 'startup_retries': self.startup_retries,
-            'last_stall': seconds(self.last_stall_ns) if self.last_stall_ns is not None else '',
-            'republished_states': self.republished, 'overruns': self.overruns,
+            'real_time_factor_achieved': self._rtf_achieved, **lockstep,
+            'overruns': self.overruns,
             'rejected_thrust_commands': plant.thrusters.rejected,
             'rejected_tilt_commands': plant.servos.rejected,
             'finished': self.finished.done(),

@@ -54,6 +54,9 @@ STATE_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
 LATCHED_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL,
                          history=HistoryPolicy.KEEP_LAST, depth=1)
+#: ``recorder_progress``: the recorder's latest progress for the plant of a paced run, kept
+#: for a reader matched later (reliable, transient local, the last sample).
+PROGRESS_QOS = LATCHED_QOS
 #: Readers that only want the latest sample (realtime odometry).
 SENSOR_QOS = qos_profile_sensor_data
 

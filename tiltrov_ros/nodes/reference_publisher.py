@@ -125,7 +125,7 @@ class ReferencePublisher(TiltrovNode):
             self._start_ns = self.get_clock().now().nanoseconds
             self.create_timer(seconds(self.period_ns), self._on_timer)
         self.add_post_set_parameters_callback(self._apply_parameters)
-        self.start_diagnostics()
+        self.join_run()
         self.get_logger().info(
             f'reference of {self.scenario or "(hold the origin)"} every '
             f'{seconds(self.period_ns):g} s on {"/clock" if self.sim_time else "wall time"}'

@@ -104,7 +104,8 @@ ALLOCATOR_PARAMS = ParamTable('thrust_allocator', [
           'again after a wrench waited input_timeout in vain)', choices=TILT_REQUEST_MODES,
           read_only=True),
     Param('input_timeout', 'float', 1.0, 'wall seconds a wrench waits for its tilt_request '
-          'before the latest one is used', 's', low=0.001, high=3600.0),
+          'before the latest one is used (in a lockstep run: before the wait is reported; '
+          'it waits on)', 's', low=0.001, high=3600.0),
     Param('wrench_timeout', 'float', 0.5, 'zero thrust (tilts held) is published every '
           'control period while the newest valid wrench_cmd is older than this; on sim time '
           'measured on /clock, else wall time since the message arrived; 0: off', 's',
@@ -200,7 +201,7 @@ class ThrustAllocatorNode(TiltRequests, TiltrovNode):
         self.create_timer(self.control_period, self._wrench_watchdog, clock=self.steady)
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
-        self.start_diagnostics()
+        self.join_run()
         self.get_logger().info(
             f'{self.allocator_config.mode} allocation, max tilt step '
             f'{self.allocator_config.tilt_step(self.robot, self.control_period):.4g} rad, '
@@ -268,6 +269,10 @@ class ThrustAllocatorNode(TiltRequests, TiltrovNode):
                                                      self.failed)
         self._new_hold_monitor()
         self.get_logger().info(f'allocator changed: {self.allocator_config}')
+
+    def on_handshake(self) -> None:
+        if self.handshake.ready:
+            self.decide_tilt_requests()
 
     def _new_hold_monitor(self) -> None:
         self.hold_monitor = HoldMonitor(self.robot, self.control_period,

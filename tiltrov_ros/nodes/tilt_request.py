@@ -5,12 +5,16 @@ allocator hold the tilts there and solve for the thrusts, ``allocate_fixed``).
 Parameter ``tilt_request`` of the allocator:
 
 * ``required``: every wrench waits for the tilt request with its stamp (they
-  travel on two topics, so either may come first); after ``input_timeout``
-  wall seconds the latest request received is used (counted on /diagnostics).
-  The wait is measured from the oldest wrench not answered: a newer wrench
-  replaces the waiting one (realtime) but does not restart the wait;
+  travel on two topics, so either may come first). In a lockstep run (the plant's
+  mode, from the run's handshake) it waits however long: a wait longer than
+  ``input_timeout`` is reported, nothing more. Otherwise (realtime, or alone), after
+  ``input_timeout`` wall seconds the latest request received is used (counted on
+  /diagnostics). The wait is measured from the oldest wrench not answered: a newer
+  wrench replaces the waiting one (realtime) but does not restart the wait;
 * ``ignored``: free allocation, the topic is not subscribed;
-* ``auto`` (default): free allocation until a tilt request carries the stamp
+* ``auto`` (default): in a lockstep run, decided at the run's handshake and said in
+  the log: ``required`` if a node of the run publishes ``tilt_request``, else
+  ``ignored``. Otherwise free allocation until a tilt request carries the stamp
   of a wrench (the switching controller's do); from then on ``required``,
   until a wrench waits ``input_timeout`` in vain, which returns to free
   allocation. A request that matches no wrench (a stray publisher, another
@@ -25,12 +29,13 @@ from typing import Any
 
 from sensor_msgs.msg import JointState
 
-from tiltrov_ros.core.names import TILT_REQUEST, TILTS
+from tiltrov_ros.core.names import LOCKSTEP, PLANT, TILT_REQUEST, TILTS
 from tiltrov_ros.core.timebase import format_ns, seconds
 
 from .base import OK, WARN
 from .conversions import FloatArray, joint_state_values
 from .guard import THROTTLE, guarded, input_callback
+from .handshake import MODE_KEY
 
 #: The ``tilt_request`` modes.
 TILT_REQUEST_MODES = ('auto', 'required', 'ignored')
@@ -68,6 +73,27 @@ class TiltRequests:
         #: wrenches that waited input_timeout in vain; replaced while waiting (realtime).
         self.stale_requests = 0
         self.dropped = 0
+        self._reported_wait: int | None = None     # lockstep: the wait told of
+
+    def in_lockstep_run(self) -> bool:
+        """The node is in a run whose plant is in lockstep (its handshake state says)."""
+        plant = self.handshake.state_of(PLANT)
+        return plant is not None and plant.extra.get(MODE_KEY) == LOCKSTEP
+
+    def decide_tilt_requests(self) -> None:
+        """In a lockstep run, at the handshake: ``auto`` becomes ``required`` if a node of
+        the run publishes ``tilt_request``, else ``ignored`` (said once)."""
+        if self.tilt_request_mode != 'auto' or not self.in_lockstep_run():
+            return
+        topic = self.resolve_topic_name(TILT_REQUEST)
+        senders = sorted(n for n, state in self.handshake.states.items()
+                         if any(t == topic for t, _ in state.publishes))
+        self.tilt_request_mode = 'required' if senders else 'ignored'
+        self._paired = bool(senders)
+        self.get_logger().info(
+            f'tilt_request auto, lockstep run: {self.tilt_request_mode} for the whole run ('
+            + (f'published by {", ".join(senders)})' if senders else 'no node of the run '
+               'publishes it)'))
 
     def _needs_request(self) -> bool:
         return self.tilt_request_mode != 'ignored' and self._paired
@@ -110,6 +136,12 @@ class TiltRequests:
             return
         waited = seconds(self.steady_ns() - waiting.since)
         if waited < self.input_timeout:
+            return
+        if self.in_lockstep_run():
+            if self._reported_wait != waiting.ns:       # waits by stamp: told, not timed out
+                self._reported_wait = waiting.ns
+                self.get_logger().warning(f'waiting for the tilt_request stamped '
+                                          f'{format_ns(waiting.ns)} ({waited:.2f} s so far)')
             return
         self.stale_requests += 1
         if self.tilt_request_mode == 'auto':

@@ -10,11 +10,12 @@ stamp, before the wrench (ARCHITECTURE.md, "The switching baseline").
 The reference is the ``setpoint`` (and ``setpoint_velocity``, the feed-forward
 d(eta_d)/dt; zero when ``use_setpoint_velocity`` is false):
 
-* ``mode: lockstep``: the ones stamped t_i. The tick waits for them; if the
-  setpoint velocity alone is still missing after ``input_timeout`` wall
-  seconds it is read as zero (counted on ``/diagnostics``); a missing setpoint
-  is waited for indefinitely (reported), since a wrench without one would
-  break the run's determinism.
+* ``mode: lockstep``: the ones stamped t_i. The tick waits for them, however long
+  (no wall-clock time changes a number): a wait longer than ``input_timeout`` is
+  reported (log, ``/diagnostics`` ``waiting_for``), nothing more. Whether
+  ``setpoint_velocity`` (and the pid's anti-windup input ``wrench_achieved``) is waited
+  for is decided once, at the run's handshake (alone: at the first tick): yes if a node
+  publishes it then, else it is read as zero (not used) for the whole run, said once.
 * ``mode: realtime``: the latest received; with none yet, a zero wrench.
 
 A repeated odom stamp (the plant re-publishes a stalled tick) re-publishes the
@@ -59,11 +60,13 @@ from tiltrov_ros.core.names import (
     LOCKSTEP,
     MODES,
     ODOM,
+    PLANT,
     REALTIME,
     SETPOINT,
     SETPOINT_VELOCITY,
     TILT_REQUEST,
     TILTS,
+    WRENCH_ACHIEVED,
     WRENCH_CMD,
 )
 from tiltrov_ros.core.paramtable import Param, ParamTable
@@ -92,6 +95,7 @@ from .conversions import (
 )
 from .executors import main_loop
 from .guard import THROTTLE, guarded, input_callback
+from .handshake import END_KEY
 from .parameters import Overrides, check, declare, declare_robot
 from .qos import PUBLISHER_QOS, RELIABLE_QOS, reader_qos
 from .watchdog import InputWatchdog
@@ -107,9 +111,9 @@ CONTROLLER_PARAMS = ParamTable('wrench_controller', [
           '(deterministic); realtime: use the latest setpoint', choices=MODES, read_only=True),
     Param('use_setpoint_velocity', 'bool', True, 'use setpoint_velocity as the feed-forward '
           'd(eta_d)/dt (false: zero)', read_only=True),
-    Param('input_timeout', 'float', 1.0, 'lockstep: wall seconds to wait for the '
-          'setpoint_velocity of a tick before reading it as zero', 's', low=0.001,
-          high=3600.0),
+    Param('input_timeout', 'float', 1.0, 'lockstep: wall seconds a tick waits for an input '
+          'before the wait is reported (log, /diagnostics); it changes nothing else', 's',
+          low=0.001, high=3600.0),
     Param('odom_frame_convention', 'str', 'ned', "odom in NED/FRD (odom_ned, base_link_frd: "
           "the plant's) or ENU/FLU (odom, base_link: REP-103/105, e.g. robot_localization), "
           'converted to NED/FRD on arrival', choices=CONVENTIONS, read_only=True),
@@ -183,6 +187,9 @@ class WrenchController(AchievedInput, TiltrovNode):
                                            RELIABLE_QOS)
 
         self.init_achieved_input()
+        #: lockstep: the inputs a tick waits for besides the setpoint, decided once at the
+        #: handshake (alone: the first tick); None: not decided yet.
+        self._waits_for: frozenset[str] | None = None
         self._setpoints: dict[int, tuple[FloatArray, FloatArray]] = {}
         self._velocities: dict[int, FloatArray] = {}
         self._latest_setpoint: tuple[int, FloatArray, FloatArray] | None = None
@@ -195,11 +202,10 @@ class WrenchController(AchievedInput, TiltrovNode):
         self._warned_tick = -1
         self.ticks = 0
         self.republished = 0
-        self.setpoint_waits = 0
-        self.velocity_timeouts = 0
         self.no_setpoint = 0
         self.safe_answers = 0
         self.resets = 0
+        self.input_waits = 0
         self.last_mode = ''
         self.odom_watchdog = InputWatchdog(
             self, ODOM, 'odom_timeout', 'publishing a zero wrench until fresh odometry returns',
@@ -215,7 +221,7 @@ class WrenchController(AchievedInput, TiltrovNode):
             self.create_timer(self.control_period, self._odom_watchdog, clock=self.steady)
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
-        self.start_diagnostics()
+        self.join_run()
         self.get_logger().info(f'{self.kind} controller, {self.mode}, odometry in '
                                f'{"ENU/FLU" if self.enu else "NED/FRD"}, control period '
                                f'{self.control_period:g} s')
@@ -304,6 +310,8 @@ class WrenchController(AchievedInput, TiltrovNode):
             self.republished += 1
             self._publish(*self._last_msgs)
             return
+        if self.run_end_ns is not None and ns >= self.run_end_ns:
+            return      # the run's last state: no tick answers it (nor the headless runner)
         if ns < self._last_ns:
             self._reset(f'odometry went back from {format_ns(self._last_ns)} to '
                         f'{format_ns(ns)}')
@@ -335,21 +343,60 @@ class WrenchController(AchievedInput, TiltrovNode):
 
     # -- the tick --------------------------------------------------------------------
 
-    def _try_compute(self, velocity_timed_out: bool = False) -> None:
+    def _decide_inputs(self) -> frozenset[str]:
+        """lockstep: the inputs besides the setpoint that a tick waits for, decided once:
+        at the run's handshake, those a node of the run publishes; alone, at the first tick,
+        those with a publisher now. Said once in the log."""
+        if self._waits_for is not None:
+            return self._waits_for
+        wanted = [t for t, used in ((SETPOINT_VELOCITY, self.use_velocity),
+                                    (WRENCH_ACHIEVED, self.kind == 'pid')) if used]
+        hs = self.handshake
+        if hs.active:
+            published = {t for state in hs.states.values() for t, _ in state.publishes}
+            waits = frozenset(t for t in wanted if self.resolve_topic_name(t) in published)
+        else:
+            waits = frozenset(t for t in wanted
+                              if self.count_publishers(self.resolve_topic_name(t)) > 0)
+        self._waits_for = waits
+        for topic in wanted:
+            if topic in waits:
+                self.get_logger().info(f'each tick waits for its {topic}' + (
+                    ' (while the anti-windup is on)' if topic == WRENCH_ACHIEVED else ''))
+            else:
+                what = ('zero feed-forward' if topic == SETPOINT_VELOCITY
+                        else 'no anti-windup')
+                self.get_logger().warning(f'no node publishes {topic}: {what} for the '
+                                          'whole run')
+        return waits
+
+    @property
+    def run_end_ns(self) -> int | None:
+        """The sim time the run ends at, as the plant of the run says (None: unknown)."""
+        plant = self.handshake.state_of(PLANT)
+        end = plant.extra.get(END_KEY) if plant is not None else None
+        return int(end) if end is not None and end.isdigit() else None
+
+    def on_handshake(self) -> None:
+        """The run's handshake is this node's moment to decide what a tick waits for."""
+        if self.lockstep and self._waits_for is None and self.handshake.ready:
+            self._decide_inputs()
+
+    def _try_compute(self) -> None:
         tick = self._tick
         if tick is None:
             return
         ns = tick.ns
         if self.lockstep:
+            waits = self._decide_inputs()
             setpoint = self._setpoints.get(ns)
             if setpoint is None:
                 return
-            velocity = self._velocities.get(ns) if self.use_velocity else np.zeros(6)
+            velocity = (self._velocities.get(ns) if SETPOINT_VELOCITY in waits
+                        else np.zeros(6))
             if velocity is None:
-                if not velocity_timed_out:
-                    return
-                velocity = np.zeros(6)
-            if self.waits_for_achieved(ns, velocity_timed_out):
+                return
+            if WRENCH_ACHIEVED in waits and self.waits_for_achieved(ns):
                 return
         else:
             if self._latest_setpoint is None:
@@ -410,7 +457,13 @@ class WrenchController(AchievedInput, TiltrovNode):
             return
         seen = self.odom_watchdog.seen
         self.safe_answers += 1
-        self._publish_zero(self.safe_stamp(stamp, seen[0] if seen else None, self.period_ns))
+        ns = self.safe_stamp(stamp, seen[0] if seen else None, self.period_ns)
+        if not self.lockstep and seen is not None:
+            # Realtime: /clock runs ahead of the odometry still on its way; stamped no
+            # later than the newest valid odom, the answer cannot overtake the next
+            # real tick (the allocator would take that one for a stamp going back).
+            ns = min(ns, seen[0])
+        self._publish_zero(ns)
 
     def _publish_zero(self, ns: int) -> None:
         """A zero wrench (and the last finite tilt request) stamped ``ns``, not kept as
@@ -440,24 +493,28 @@ class WrenchController(AchievedInput, TiltrovNode):
 
     @guarded
     def _watchdog(self) -> None:
+        """lockstep: report a tick that waits longer than ``input_timeout`` (once per tick)."""
         tick = self._tick
-        if tick is None:
+        if tick is None or self._warned_tick == tick.ns:
             return
         waited = seconds(self.steady_ns() - tick.since)
         if waited < self.input_timeout:
             return
-        if tick.ns in self._setpoints:     # the velocity or the pid's achieved wrench is late
-            if self.use_velocity and tick.ns not in self._velocities:
-                self.velocity_timeouts += 1
-                self.get_logger().warning(f'no setpoint_velocity stamped {format_ns(tick.ns)} '
-                                          f'after {waited:.2f} s: using zero feed-forward',
-                                          throttle_duration_sec=THROTTLE)
-            self._try_compute(velocity_timed_out=True)
-        elif self._warned_tick != tick.ns:
-            self._warned_tick = tick.ns
-            self.setpoint_waits += 1
-            self.get_logger().warning(f'waiting for the setpoint stamped {format_ns(tick.ns)} '
-                                      f'({waited:.2f} s so far)', throttle_duration_sec=THROTTLE)
+        self._warned_tick = tick.ns
+        self.input_waits += 1
+        missing = self.missing_inputs(tick.ns)
+        self.get_logger().warning(f'waiting for the {" and ".join(missing) or "inputs"} '
+                                  f'stamped {format_ns(tick.ns)} ({waited:.2f} s so far)')
+
+    def missing_inputs(self, ns: int) -> list[str]:
+        """The inputs tick ``ns`` still waits for."""
+        waits = self._waits_for or frozenset()
+        missing = [] if ns in self._setpoints else [SETPOINT]
+        if SETPOINT_VELOCITY in waits and ns not in self._velocities:
+            missing.append(SETPOINT_VELOCITY)
+        if WRENCH_ACHIEVED in waits and self.waits_for_achieved(ns):
+            missing.append(WRENCH_ACHIEVED)
+        return missing
 
     def on_callback_error(self, callback: str, exc: Exception) -> None:
         super().on_callback_error(callback, exc)
@@ -477,18 +534,20 @@ class WrenchController(AchievedInput, TiltrovNode):
         elif (tick is not None and self.lockstep
                 and seconds(self.steady_ns() - tick.since) >= self.input_timeout):
             level = WARN
-            message = f'waiting for the setpoint stamped {format_ns(tick.ns)}'
-        elif self.velocity_timeouts or self.no_setpoint:
+            message = (f'waiting for the {" and ".join(self.missing_inputs(tick.ns))} '
+                       f'stamped {format_ns(tick.ns)}')
+        elif self.no_setpoint:
             level = WARN
-            message += (f'; {self.velocity_timeouts} velocity timeout(s), '
-                        f'{self.no_setpoint} tick(s) without setpoint')
+            message += f'; {self.no_setpoint} tick(s) without setpoint'
+        waiting = (', '.join(self.missing_inputs(tick.ns))
+                   if tick is not None and self.lockstep else '')
         return level, message, {
             'controller': self.kind, 'mode': self.mode, 'ticks': self.ticks,
             'last_tick': seconds(max(self._last_ns, 0)), 'control_mode': self.last_mode,
-            'republished': self.republished, 'setpoint_waits': self.setpoint_waits,
-            'velocity_timeouts': self.velocity_timeouts,
+            'republished': self.republished, 'input_waits': self.input_waits,
+            'waiting_for': waiting,
+            'waits_for': sorted(self._waits_for) if self._waits_for is not None else '',
             'ticks_without_setpoint': self.no_setpoint, 'safe_answers': self.safe_answers,
-            'achieved_timeouts': self.achieved_timeouts,
             'resets': self.resets, 'odom_stale': self.odom_watchdog.stale,
             'odom_stale_events': self.odom_watchdog.events,
             'watchdog_zero_wrenches': self.watchdog_outputs,

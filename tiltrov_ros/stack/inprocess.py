@@ -72,8 +72,10 @@ def run_single_process(specs: Sequence[NodeSpec], namespace: str, out: Output,
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
+    from rclpy.task import Future
 
     from tiltrov_ros.nodes.executors import (
+        FINISH_POLL,
         STARTUP_ERRORS,
         STOP_POLL,
         make_executor,
@@ -90,9 +92,10 @@ def run_single_process(specs: Sequence[NodeSpec], namespace: str, out: Output,
     status = StatusFile(status_file)
     code = EXIT_FAILED
     stop = threading.Event()
+    hurry = threading.Event()
 
     def on_signal(signum: int, frame: object) -> None:
-        stop.set()
+        (hurry if stop.is_set() else stop).set()
 
     # Signal handlers belong to the main thread (a caller in another thread stops the
     # run by its own means).
@@ -128,12 +131,16 @@ def run_single_process(specs: Sequence[NodeSpec], namespace: str, out: Output,
             out.line('launch', 'SIGINT: stopping every node')
             code = EXIT_INTERRUPTED
     finally:
-        # Every node's final counts, and its readers (the recorder, still spinning)
-        # have every message before a writer goes.
-        for node in nodes:
-            if getattr(node, 'stack_node', False):
-                node.publish_diagnostics(final=True)
-                node.wait_for_delivery()
+        # Every node's final counts; then, while the recorder still spins, until it has
+        # written them and every message they count (nodes/executors.finish).
+        stack = [n for n in nodes if getattr(n, 'stack_node', False)]
+        for node in stack:
+            node.publish_diagnostics(final=True)
+        if executor is not None:
+            done = Future()
+            while (context.ok() and not hurry.is_set()
+                   and not all(n.recorded_by_the_run() for n in stack)):
+                executor.spin_until_future_complete(done, timeout_sec=FINISH_POLL)
         if executor is not None:
             executor.shutdown()
         if side is not None:

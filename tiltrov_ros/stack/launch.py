@@ -3,6 +3,7 @@ process (no ``ros2 launch`` needed); the exit code says how it ended."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 import sys
 import tempfile
@@ -13,14 +14,20 @@ from tiltrov_ros.core.errors import TiltrovError, UnreadableFileError
 from tiltrov_ros.core.names import normalize_namespace
 
 from .inprocess import run_single_process
-from .specs import LaunchError, LaunchOptions, namespaced_config, stack_specs
+from .specs import (
+    LaunchError,
+    LaunchOptions,
+    dds_environment,
+    namespaced_config,
+    stack_specs,
+)
 from .supervisor import EXIT_FAILED, EXIT_OK, EXIT_USAGE, Monitor, Output, run_processes
 
 
 def launch(options: LaunchOptions, stream: IO[str] | None = None, *,
-           monitor: Monitor | None = None, linger: float = 0.0) -> int:
-    """Run one launch; the exit code of ``tiltrov launch`` (``monitor``, ``linger``:
-    see :func:`run_processes`; separate processes only)."""
+           monitor: Monitor | None = None) -> int:
+    """Run one launch; the exit code of ``tiltrov launch`` (``monitor``: see
+    :func:`run_processes`; separate processes only)."""
     out = Output(stream if stream is not None else sys.stdout)
     namespace = normalize_namespace(options.namespace)
     try:
@@ -46,9 +53,11 @@ def launch(options: LaunchOptions, stream: IO[str] | None = None, *,
             code = run_single_process(specs, namespace, out, summary, options.executor,
                                       status_file=options.status_file)
         else:
-            env = {'TILTROV_EXECUTOR': options.executor} if options.executor else {}
+            env = dds_environment(os.environ)
+            if options.executor:
+                env['TILTROV_EXECUTOR'] = options.executor
             code = run_processes(specs, namespace, out, summary, Path(tmp), env,
-                                 respawn=options.respawn, monitor=monitor, linger=linger,
+                                 respawn=options.respawn, monitor=monitor,
                                  status_file=options.status_file)
     if options.record is not None and Path(options.record).exists():
         lost = report_losses(Path(options.record))

@@ -30,6 +30,7 @@ Imported only by the launch file: ``launch`` and ``launch_ros`` come with ROS
 from __future__ import annotations
 
 from dataclasses import replace
+import os
 from pathlib import Path
 import shutil
 import tempfile
@@ -60,7 +61,14 @@ from tiltrov_ros.core.robot_description import robot_urdf
 from tiltrov_ros.core.runner import StackConfig
 from tiltrov_ros.core.timebase import NS_PER_S
 
-from .specs import LaunchError, LaunchOptions, NodeSpec, namespaced_config, stack_specs
+from .specs import (
+    LaunchError,
+    LaunchOptions,
+    NodeSpec,
+    dds_environment,
+    namespaced_config,
+    stack_specs,
+)
 from .supervisor import RECORDER_STOP_TIMEOUT, STOP_TIMEOUTS
 
 PACKAGE = 'tiltrov_ros'
@@ -140,11 +148,14 @@ def _stack(context: LaunchContext) -> list[Any]:
 
 
 def _node(spec: NodeSpec, namespace: str) -> Node:
-    # A stopping node waits up to DELIVERY_WAIT for its readers' acknowledgements:
-    # launch's default 5 s before SIGTERM cut a loaded reference publisher short (the
-    # launch then failed); tiltrov launch's 13 s, the recorder's 20 s.
-    extra = {'sigterm_timeout': str(
+    # A stopping node of the run waits until the recorder has its last messages (the
+    # recorder until it has every node's): SIGTERM only bounds a hang, as in tiltrov
+    # launch (13 s, the recorder 20 s). The shipped Fast DDS profile, unless one is set.
+    extra: dict[str, Any] = {'sigterm_timeout': str(
         RECORDER_STOP_TIMEOUT if spec.name == RECORDER else STOP_TIMEOUTS[0])}
+    env = dds_environment(os.environ)
+    if env:
+        extra['additional_env'] = env
     return Node(package=PACKAGE, executable=spec.name, name=spec.name,
                 namespace=namespace or None, output='screen',
                 parameters=[*(str(path) for path in spec.params_files), spec.all_overrides()],

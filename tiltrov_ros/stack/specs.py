@@ -34,15 +34,27 @@ from tiltrov_ros.core.names import (
 from tiltrov_ros.core.params import robot_file
 from tiltrov_ros.core.runner import StackConfig, stack_config
 from tiltrov_ros.core.timebase import seconds, to_ns
-from tiltrov_ros.paths import config_file
+from tiltrov_ros.paths import config_dir, config_file
 
 #: Where the recorder node lives; ``--record`` starts it.
 RECORDER_MODULE = 'tiltrov_ros.nodes.bag_recorder'
 
-#: s (wall) the plant waits, once the recorder reads odom, before the initial state.
-RECORDER_STARTUP_DELAY = 0.5
 #: Nodes ``--respawn`` may start again (the plant holds the run's state).
 RESPAWNABLE = (CONTROLLER, ALLOCATOR, REFERENCE)
+#: The environment variables naming a Fast DDS profiles file (Fast DDS 2 reads the first).
+DDS_PROFILE_VARIABLES = ('FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_DEFAULT_PROFILES_FILE')
+
+
+def dds_environment(environ: Mapping[str, str]) -> dict[str, str]:
+    """The environment the launchers add to each node process: the shipped Fast DDS
+    profile (``config/fastdds.xml``: announcements every 0.5 s, so that a node that missed
+    another's start finds it within half a second), unless ``environ`` names one."""
+    if any(environ.get(name) for name in DDS_PROFILE_VARIABLES):
+        return {}
+    path = str(config_dir() / 'fastdds.xml')
+    return {name: path for name in DDS_PROFILE_VARIABLES}
+
+
 class LaunchError(TiltrovError):
     """The launch cannot start (bad options, missing executable)."""
 
@@ -69,6 +81,7 @@ class LaunchOptions:
     launcher: str = 'tiltrov launch'       # what started the run (the bag's run_info)
     markers: bool = True                   # the plant publishes robot_markers
     tf_thrusters: bool = True              # False: robot_state_publisher publishes them
+    join: tuple[str, ...] = ()             # nodes outside the package the run waits for
 
 
 @dataclass(frozen=True)
@@ -151,6 +164,13 @@ def resolve(options: LaunchOptions) -> tuple[StackConfig, float]:
     return config, float(duration)
 
 
+def run_node_names(options: LaunchOptions) -> list[str]:
+    """The names of the run's nodes, as every node is told them (``run_nodes``): the
+    recorder with ``--record``, the four stack nodes, and those that ``--join``."""
+    return [*((RECORDER,) if options.record is not None else ()),
+            ALLOCATOR, CONTROLLER, REFERENCE, PLANT, *options.join]
+
+
 def stack_specs(options: LaunchOptions, *, config_dir: Path | None = None,
                 extra_odom_readers: int = 0) -> tuple[list[NodeSpec], StackConfig, float]:
     """The nodes of a launch, in start order (the recorder, if any, first).
@@ -184,32 +204,30 @@ def stack_specs(options: LaunchOptions, *, config_dir: Path | None = None,
     sim = {'use_sim_time': True}
     kind = config.controller.kind
 
+    # Every node is told the run's nodes: the handshake (nodes/handshake.py) starts the
+    # run once each has matched every other, seen from both sides.
+    run = {'run_nodes': run_node_names(options)}
     plant: dict[str, Any] = {
         'mode': mode, 'real_time_factor': float(options.real_time_factor),
         'scenario': scenario_param, 'duration': duration, 'exit_at_end': True,
         'startup_subscribers': 1 + (options.record is not None) + extra_odom_readers,
-        **robot}
-    if options.record is not None:
-        # The recorder must have matched every writer of the stack, not only odom's.
-        plant['startup_delay'] = RECORDER_STARTUP_DELAY
+        **run, **robot}
+    if options.record is not None and options.respawn:
+        # A node may be killed: the plant uses no command before the bag has it.
+        plant['recorder_window'] = 0.0
     if options.stall_timeout is not None:
         plant['stall_timeout'] = float(options.stall_timeout)
     if not options.markers:
         plant['markers_period'] = 0.0
     if not options.tf_thrusters:
         plant['tf_thrusters'] = False
-    controller = {'controller': kind, 'mode': mode, **sim, **robot}
+    controller = {'controller': kind, 'mode': mode, **run, **sim, **robot}
     allocator: dict[str, Any] = {
         'tilt_request': 'required' if kind == 'switching' else 'ignored',
-        'scenario': scenario_param, **sim, **robot}
+        'scenario': scenario_param, **run, **sim, **robot}
     if options.allocator is not None:
         allocator['mode'] = options.allocator
-    reference = {'scenario': scenario_param, 'duration': duration, **sim, **robot}
-    if options.record is not None and options.lockstep:
-        # Nothing these nodes publish goes out before the recorder reads it (matters
-        # for a node started again mid-run: --respawn).
-        for overrides in (controller, allocator, reference):
-            overrides['wait_for_recorder'] = RECORDER
+    reference = {'scenario': scenario_param, 'duration': duration, **run, **sim, **robot}
 
     def spec(name: str, module: str, cls: str, overrides: dict[str, Any]) -> NodeSpec:
         return NodeSpec(name, f'tiltrov_ros.nodes.{module}', cls, files(name), overrides,
@@ -222,7 +240,8 @@ def stack_specs(options: LaunchOptions, *, config_dir: Path | None = None,
         spec(PLANT, 'plant_simulator', 'PlantSimulator', plant),
     ]
     if options.record is not None:
-        specs.insert(0, recorder_spec(options, config, duration, raw.pop(RECORDER, [])))
+        specs.insert(0, recorder_spec(options, config, duration, raw.pop(RECORDER, []),
+                                      run_nodes=run['run_nodes']))
     if raw:
         raise LaunchError(f'--param for unknown node(s): {", ".join(sorted(raw))}; nodes: '
                           f'{", ".join(s.name for s in specs)}')
@@ -246,15 +265,16 @@ def run_info(options: LaunchOptions, config: StackConfig, duration: float) -> di
 
 
 def recorder_spec(options: LaunchOptions, config: StackConfig, duration: float,
-                  raw: Sequence[str] = ()) -> NodeSpec:
-    """The ``bag_recorder`` node recording every topic into ``--record DIR``.
+                  raw: Sequence[str] = (), *, run_nodes: Sequence[str] = ()) -> NodeSpec:
+    """The ``bag_recorder`` node recording every topic into ``--record DIR``, one of the
+    run's nodes (``run_nodes``).
 
     It runs on sim time so the bag's log times are the stack's.
     """
     assert options.record is not None
     overrides = {'output': str(Path(options.record).resolve()),
                  'run_info': json.dumps(run_info(options, config, duration), sort_keys=True),
-                 'use_sim_time': True}
+                 'use_sim_time': True, 'run_nodes': list(run_nodes)}
     return NodeSpec(RECORDER, RECORDER_MODULE, 'BagRecorder', (), overrides, tuple(raw))
 
 

@@ -206,7 +206,7 @@ class _Supervisor:
                                                 'running': c.process.poll() is None}
                                   for c in self.children}, code)
 
-    def watch(self, summary: str, started: float, linger: float) -> int:
+    def watch(self, summary: str, started: float) -> int:
         """Until the plant ends the run (EXIT_OK) or a node not respawned dies (EXIT_FAILED);
         ``started``: monotonic time the launch began."""
         while True:
@@ -219,8 +219,6 @@ class _Supervisor:
                     wall = time.monotonic() - started
                     if self.monitor is not None:
                         self.monitor.finished(_pids(self.children))
-                    if linger > 0:
-                        time.sleep(linger)
                     self.out.line('launch', f'{summary} done in {wall:.2f} s wall; stopping '
                                             'the other nodes')
                     return EXIT_OK
@@ -242,13 +240,13 @@ class _Supervisor:
 def run_processes(specs: Sequence[NodeSpec], namespace: str, out: Output,
                   summary: str, workdir: Path, extra_env: Mapping[str, str] | None = None,
                   *, respawn: Sequence[str] = (), monitor: Monitor | None = None,
-                  linger: float = 0.0, status_file: Path | None = None) -> int:
+                  status_file: Path | None = None) -> int:
     """Start every node as a process; return when the run ends or a node dies.
 
-    A node named in ``respawn`` that dies is started again instead. ``linger``:
-    wall seconds to wait after the plant's end before stopping the others (their
-    last /diagnostics, with final counts, reach the recorder). ``status_file``:
-    see :class:`StatusFile`.
+    A node named in ``respawn`` that dies is started again instead. The others are
+    stopped once the plant has ended the run (each publishes its final report and
+    waits until the recorder has it: nodes/executors.finish). ``status_file``: see
+    :class:`StatusFile`.
     """
     env = dict(os.environ, PYTHONUNBUFFERED='1', RCUTILS_LOGGING_BUFFERED_STREAM='1',
                **(extra_env or {}))
@@ -276,7 +274,7 @@ def run_processes(specs: Sequence[NodeSpec], namespace: str, out: Output,
             supervisor.children.append(supervisor.start(spec))
             supervisor.report('starting')
         supervisor.report('running')
-        code = supervisor.watch(summary, started, linger)
+        code = supervisor.watch(summary, started)
     except _Stop as stop:
         out.line('launch', f'{stop.args[0]}: stopping every node')
         code = EXIT_INTERRUPTED
