@@ -45,6 +45,7 @@ TOPIC_TYPES: dict[str, Any] = {
     'odom': Odometry, 'joint_states': JointState, '/clock': Clock,
     'setpoint': PoseStamped, 'setpoint_velocity': TwistStamped,
     'wrench_cmd': WrenchStamped, 'tilt_request': JointState,
+    'pid_integral': JointState, 'tilt_target': JointState,
     'thrust_cmd': JointState, 'tilt_cmd': JointState, 'wrench_achieved': WrenchStamped,
     '/diagnostics': DiagnosticArray, 'robot_markers': MarkerArray,
 }
@@ -368,10 +369,26 @@ RUN_SERIES = ('t', 'position', 'quaternion', 'nu', 'thrust', 'tc', 'wrench_cmd',
               'thrust_cmd', 'tilt_cmd', 'wrench_achieved')
 
 
-def assert_same_run(recorded: Any, expected: Any) -> None:
+def assert_same_run(recorded: Any, expected: Any, atol: float = 1e-9) -> None:
     """A recorded lockstep run (``read_runlog``) is the headless run: nothing missing,
-    every series to 1e-9."""
+    every series to ``atol`` (0: to the last bit)."""
     assert recorded.meta['bag']['missing'] == {}
     for name in RUN_SERIES:
         np.testing.assert_allclose(getattr(recorded, name), getattr(expected, name),
-                                   rtol=0, atol=1e-9, err_msg=name)
+                                   rtol=0, atol=atol, err_msg=name)
+
+
+class SimTime:
+    """The newest ``odom`` stamp a probe has taken: the plant's sim time (one sample kept:
+    a probe that keeps every one of a lockstep run's falls behind on a loaded machine)."""
+
+    def __init__(self, node: Any) -> None:
+        self.ns = -1
+        node.create_subscription(Odometry, 'odom', self._take, QoSProfile(
+            depth=1, reliability=ReliabilityPolicy.RELIABLE))
+
+    def _take(self, msg: Odometry) -> None:
+        self.ns = stamp_ns(msg.header.stamp)
+
+    def reached(self, seconds: float) -> bool:
+        return self.ns >= seconds * NS

@@ -434,3 +434,26 @@ def test_the_pid_integral_does_not_wind_up_against_a_reported_shortfall(
     off.update(0.05, np.zeros(3), np.array([1.0, 0, 0, 0]), np.zeros(6), ref,
                achieved=first.wrench - np.array([5.0, 0, 0, 0, 0, 0]))
     assert off.integral[0] == pytest.approx(0.05)    # type: ignore[attr-defined]
+
+
+@pytest.mark.parametrize('antiwindup', [0.0, 1.0])
+def test_a_resumed_pid_continues_its_predecessor_to_the_last_bit(robot, antiwindup) -> None:
+    """``resume`` with the state a pid had after a tick (the integral after it, its time,
+    its wrench: what a respawned controller gets handed, nodes/handoff.py) gives the very
+    outputs the predecessor gives from then on, anti-windup included."""
+    gains = dataclasses.replace(GAINS, antiwindup=antiwindup)
+    rng = np.random.default_rng(5)
+    states = [(rng.normal(0, 0.2, 3), _q(rng.normal(0, 0.1), rng.normal(0, 0.1), 0.0),
+               rng.normal(0, 0.1, 6)) for _ in range(12)]
+    ref = _ref((0.3, -0.2, 0.1))
+    achieved = [rng.normal(0, 5.0, 6) for _ in states]
+    first = PIDController(gains, robot)
+    outs = [first.update(0.05 * k, *state, ref, achieved=achieved[k]).wrench
+            for k, state in enumerate(states[:6])]
+    successor = PIDController(gains, robot)
+    successor.resume(0.05 * 5, first.integral.copy(), outs[-1])
+    for k in range(6, len(states)):
+        expected = first.update(0.05 * k, *states[k], ref, achieved=achieved[k]).wrench
+        got = successor.update(0.05 * k, *states[k], ref, achieved=achieved[k]).wrench
+        np.testing.assert_array_equal(got, expected)
+        np.testing.assert_array_equal(successor.integral, first.integral)

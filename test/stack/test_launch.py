@@ -10,13 +10,13 @@ import subprocess
 import sys
 from typing import Any
 
+import numpy as np
 import pytest
-from ros_stack import MS, Probe, assert_same_run, diagnostics
+from ros_stack import MS, NS, SimTime, assert_same_run
 from ros_stack import LaunchProcess as _Launch
 from ros_stack import alive as _alive
 from ros_stack import ready as _ready
 
-from tiltrov_ros.core.names import PLANT
 from tiltrov_ros.core.runner import run_scenario, stack_config
 
 NODES = ('thrust_allocator', 'wrench_controller', 'reference_publisher', 'plant_simulator')
@@ -131,54 +131,42 @@ def test_a_recorded_run_starts_on_the_handshake_with_one_message_per_step_and_ti
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize('victim', ['thrust_allocator', 'wrench_controller'])
-def test_a_killed_node_is_respawned_and_the_loop_resumes(ros: Any, tmp_path: Path,
-                                                         victim: str) -> None:
-    """kill -9 of the allocator (or the controller) mid-run (lockstep, recorded,
-    --respawn): the plant keeps its state and waits at its tick (a stall); the new
-    process joins the run's handshake, the plant publishes the tick's state again once
-    every node has matched it, the new process answers, the run ends normally. The
-    plant uses no command before the bag has it (--respawn paces the run tick by tick),
-    so the bag has every step and tick of every node's topics."""
-    from tiltrov_ros.bag.bagfile import iter_raw
-    from tiltrov_ros.bag.cdr import leading_stamp_ns
+@pytest.mark.parametrize(('victims', 'seed'), [(('thrust_allocator',), 3),
+                                               (('wrench_controller', 'thrust_allocator'), 11)])
+def test_killed_nodes_are_taken_over_bit_for_bit(ros: Any, tmp_path: Path,
+                                                 victims: tuple[str, ...], seed: int) -> None:
+    """kill -9 of the allocator (and the controller) at seeded random moments of a
+    recorded 120 s lockstep pid run with --respawn: each one's standby takes over with
+    the state its predecessor handed over (the pid's integral, the allocator's last
+    answer and servo travel), joins the run's handshake, and the plant publishes the
+    waited tick again once every node has matched it. The run ends normally and the
+    bag is the headless run without kills to the last bit, every step and tick in it
+    (the plant used no command before the bag had it)."""
+    from tiltrov_ros.bag.losses import missing_stamps
+    from tiltrov_ros.bag.reader import read_runlog
 
+    rng = np.random.default_rng(seed)
+    kill_at = sorted(float(t) for t in rng.uniform(5.0, 100.0, len(victims)))
     bag = tmp_path / 'bag'
-    duration = 120.0           # some 8 s wall in lockstep: the kill lands mid-run
-    launch = _Launch(tmp_path, '--duration', str(duration), '--record', str(bag),
-                     '--respawn', victim, '--stall-timeout', '0.5')
+    duration = 120.0
+    respawn = [arg for v in victims for arg in ('--respawn', v)]
+    launch = _Launch(tmp_path, '--scenario', 'current_hold', '--controller', 'pid',
+                     '--duration', str(duration), '--record', str(bag), *respawn)
+    sim = SimTime(ros.node('sim_time_probe'))
     try:
-        pids = launch.wait_running()
-
-        def stepping(probe: Probe) -> bool:     # the plant is past t = 0
-            return float(diagnostics(probe, PLANT).get('sim_time', 0.0)) > 0.0
-
-        _ready(ros, (PLANT, victim), until=stepping)
-        os.kill(pids[victim], signal.SIGKILL)
-        assert launch.finish(timeout=120) == 0, launch.output
+        launch.wait_running()
+        for victim, at in zip(victims, kill_at):
+            assert ros.spin_until(lambda at=at: sim.reached(at), timeout=120.0), launch.output
+            os.kill(launch.pids()[victim], signal.SIGKILL)
+        assert launch.finish(timeout=180) == 0, launch.output
     finally:
         launch.cleanup()
-    lines = launch.lines
-    out = ''.join(lines)
-    assert f'{victim} died (exit code {-signal.SIGKILL}); starting it again' in out
-    assert out.count(f'started {victim}') == 2
-    # it waited mid-run (a stall at t = 0 is the start-up's, not the kill's)
-    stalls = [stall for stall in (float(line.split('stall at ')[1].split(' s:')[0])
-                                  for line in lines if 'stall at ' in line)
-              if 0.0 < stall < duration]
-    assert stalls, out
-
-    stamps: dict[str, set[int]] = {}
-    for raw in iter_raw(bag):
-        stamp = leading_stamp_ns(raw.data, raw.msgtype)
-        if stamp is not None:
-            stamps.setdefault(raw.topic, set()).add(stamp // MS)
-    steps = set(range(0, int(duration * 1000) + 1, 10))
-    ticks = set(range(0, int(duration * 1000), 50))
-    for topic in ('/odom', '/joint_states', '/clock'):
-        assert stamps[topic] == steps, topic
-    for topic in ('/setpoint', '/setpoint_velocity', '/wrench_cmd', '/thrust_cmd',
-                  '/tilt_cmd', '/wrench_achieved'):
-        missing = sorted(ticks - stamps[topic])
-        assert not missing, (topic, stalls, missing[:10])
-    assert 'every node of the run is ready again' in out
+    out = launch.output
+    for victim in victims:
+        assert f'{victim} died (exit code {-signal.SIGKILL}); its standby' in out, out
+    assert out.count('every node of the run is ready again') == len(victims), out
+    assert 'resumed from its predecessor' in out or 'resumed the pid' in out
+    assert 'not bumpless' not in out and 'starts from zero' not in out, out
+    assert missing_stamps(bag, int(duration * NS), 10 * MS, 50 * MS) == {}
+    assert_same_run(read_runlog(bag), run_scenario(stack_config('current_hold', 'pid'),
+                                                   duration=duration), atol=0.0)

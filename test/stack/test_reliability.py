@@ -18,12 +18,12 @@ from typing import Any
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
 from nav_msgs.msg import Odometry
 import pytest
-from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
 from ros_stack import (
     KEEP_ALL,
     LaunchProcess,
     Probe,
+    SimTime,
     alive,
     diagnostics,
     joint_state,
@@ -142,28 +142,6 @@ def _assert_thrust_kept(watch: Probe, start: int) -> None:
         min(before), statistics.median(during))
 
 
-class _SimTime:
-    """The newest ``odom`` stamp this test has taken: the plant's sim time.
-
-    One sample is kept (KEEP_LAST 1): a lockstep run publishes some 1 000 a second,
-    and a probe that keeps them all falls behind on a loaded machine (it decodes every
-    one), so that it reported 22 s of sim while the run had already ended. The plant
-    waits for this reader before it starts (``startup_subscribers``, see
-    :data:`_WAIT_FOR_THE_TEST`): under load a probe was matched 1.7 s of wall time
-    after a realtime start, long enough to miss a whole lockstep run."""
-
-    def __init__(self, node: Any) -> None:
-        self.ns = -1
-        node.create_subscription(Odometry, 'odom', self._take, QoSProfile(
-            depth=1, reliability=ReliabilityPolicy.RELIABLE))
-
-    def _take(self, msg: Odometry) -> None:
-        self.ns = stamp_ns(msg.header.stamp)
-
-    def reached(self, seconds: float) -> bool:
-        return self.ns >= seconds * NS_PER_S
-
-
 #: The plant's odom readers before it starts: the controller, the recorder and the test.
 _WAIT_FOR_THE_TEST = ('--param', 'plant_simulator:startup_subscribers:=3')
 #: s of sim: the first step after the first tick (every node has answered once).
@@ -171,12 +149,12 @@ _FIRST_TICK_ANSWERED = 0.01
 
 
 def _recorder_stopped(ros: Any, tmp_path: Path, bag: Path, args: tuple[str, ...],
-                      stop_at: float, resume_when: Callable[[_SimTime, dict[str, int]], bool],
+                      stop_at: float, resume_when: Callable[[SimTime, dict[str, int]], bool],
                       *, timeout: float, behind: float = 0.0) -> tuple[int, str]:
     """``tiltrov launch ARGS --record BAG`` with the recorder stopped (SIGSTOP) once
     the sim time reaches ``stop_at`` s and resumed (SIGCONT) ``behind`` s after
     ``resume_when(sim time, pids)`` holds: the launch's exit code and output."""
-    sim = _SimTime(ros.node('sim_time_probe'))
+    sim = SimTime(ros.node('sim_time_probe'))
     launch = LaunchProcess(tmp_path, *args, *_WAIT_FOR_THE_TEST, '--record', str(bag))
     try:
         pids = launch.wait_running()
@@ -254,7 +232,7 @@ def test_a_valid_command_stamped_ahead_does_not_shut_out_the_real_ones(ros: Any,
         # The plant's time as fresh as the test can have it (one sample kept): read
         # off the keep-all probe, behind on a loaded machine, a 0.45 s lead once was
         # less than a step at the plant, and the command was taken.
-        sim = _SimTime(ros.node('sim_time_probe'))
+        sim = SimTime(ros.node('sim_time_probe'))
         assert ros.spin_until(lambda: len(watch['odom']) > 0 and sim.ns >= 0
                               and pub.get_subscription_count() > 0
                               and _thrusting_for_a_second(watch), timeout=60.0)
@@ -621,7 +599,7 @@ def test_a_stopped_recorder_holds_a_paced_run_and_nothing_is_lost(ros: Any,
     has every step and tick and the launch exits 0 (before: nothing waited for the
     recorder, which lost what overflowed the writers' histories)."""
     bag = tmp_path / 'bag'
-    sim = _SimTime(ros.node('sim_time_probe'))
+    sim = SimTime(ros.node('sim_time_probe'))
     launch = LaunchProcess(tmp_path, '--duration', '8', *_WAIT_FOR_THE_TEST, '--record', str(bag))
     try:
         pids = launch.wait_running()
@@ -661,7 +639,7 @@ def test_a_killed_recorder_ends_the_run_with_exit_1_naming_it(ros: Any,
     """kill -9 of the recorder mid-run (lockstep, paced by it): nothing waits for it any
     more; the launch ends, exit 1, naming it (the bag is not whole)."""
     bag = tmp_path / 'bag'
-    sim = _SimTime(ros.node('sim_time_probe'))
+    sim = SimTime(ros.node('sim_time_probe'))
     launch = LaunchProcess(tmp_path, '--duration', '600', *_WAIT_FOR_THE_TEST,
                            '--record', str(bag))
     try:

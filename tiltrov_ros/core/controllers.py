@@ -377,12 +377,23 @@ class PIDController:
         self.integral = np.zeros(6)
         self._last_t: float | None = None     # also: no previous command in self._last
 
+    def resume(self, t: float, integral: ArrayLike, last: ArrayLike | None = None) -> None:
+        """Continue as the controller that answered the tick at ``t`` (s) with the
+        integral ``integral`` after it and the wrench ``last`` (None: unknown, no
+        anti-windup at the next tick): the next update is that controller's, to the bit
+        (a respawned controller resumes its predecessor, nodes/handoff.py)."""
+        self.integral = integral
+        self._last_t = float(t)
+        self._last = (np.array(last, dtype=np.float64).reshape(6) if last is not None
+                      else np.full(6, np.nan))
+
     def update(self, t: float, position: FloatArray, quaternion: FloatArray, nu: FloatArray,
                reference: Reference, achieved: FloatArray | None = None) -> ControlOutput:
         """``achieved``: what the allocator achieved of this controller's previous wrench
         (None: unknown; the integral then integrates as without it)."""
         previous = self._last_t
-        got = achieved if previous is not None and self.uses_achieved else None
+        got = (achieved if previous is not None and self.uses_achieved
+               and np.all(np.isfinite(self._last)) else None)
         if self.compiled and self._law is not None:
             dt = 0.0 if previous is None else min(max(t - previous, 0.0), 1.0)
             out = self._law(position, quaternion, nu, reference, dt=dt,

@@ -59,6 +59,10 @@ TILT_REQUEST = 'tilt_request'
 THRUST_CMD = 'thrust_cmd'
 TILT_CMD = 'tilt_cmd'
 WRENCH_ACHIEVED = 'wrench_achieved'
+#: The restart handoff (nodes/handoff.py): the pid's integral after each tick; the
+#: allocator's servo travel target (no joints when none is under way).
+PID_INTEGRAL = 'pid_integral'
+TILT_TARGET = 'tilt_target'
 CLOCK = '/clock'
 DIAGNOSTICS = '/diagnostics'
 ROBOT_MARKERS = 'robot_markers'
@@ -81,8 +85,8 @@ HANDSHAKE_TOPICS: dict[str, str] = {HANDSHAKE: 'diagnostic_msgs/msg/DiagnosticSt
                                     RECORDER_PROGRESS: 'rosgraph_msgs/msg/Clock'}
 #: The topics stamped with the control tick they answer or serve, published by the nodes
 #: other than the plant: a recorded lockstep run is paced on them and on ``/clock``.
-TICK_TOPICS = (SETPOINT_VELOCITY, SETPOINT, TILT_REQUEST, WRENCH_CMD, WRENCH_ACHIEVED,
-               TILT_CMD, THRUST_CMD)
+TICK_TOPICS = (SETPOINT_VELOCITY, SETPOINT, TILT_REQUEST, PID_INTEGRAL, WRENCH_CMD,
+               TILT_TARGET, WRENCH_ACHIEVED, TILT_CMD, THRUST_CMD)
 
 #: Every topic of the stack -> its ROS 2 type, in the order the stack publishes
 #: them within a step and a tick.
@@ -93,7 +97,9 @@ STACK_TOPICS: dict[str, str] = {
     SETPOINT_VELOCITY: 'geometry_msgs/msg/TwistStamped',
     SETPOINT: 'geometry_msgs/msg/PoseStamped',
     TILT_REQUEST: 'sensor_msgs/msg/JointState',
+    PID_INTEGRAL: 'sensor_msgs/msg/JointState',
     WRENCH_CMD: 'geometry_msgs/msg/WrenchStamped',
+    TILT_TARGET: 'sensor_msgs/msg/JointState',
     WRENCH_ACHIEVED: 'geometry_msgs/msg/WrenchStamped',
     TILT_CMD: 'sensor_msgs/msg/JointState',
     THRUST_CMD: 'sensor_msgs/msg/JointState',
@@ -119,6 +125,9 @@ CONTROLLER = 'wrench_controller'
 ALLOCATOR = 'thrust_allocator'
 REFERENCE = 'reference_publisher'
 RECORDER = 'bag_recorder'
+#: Environment variable (value 1) that makes a node's process a standby: it keeps the
+#: node's restart handoff and builds the node on SIGUSR1 (nodes/handoff.py).
+STANDBY_ENV = 'TILTROV_STANDBY'
 #: Every node of the package (a parameter file section naming none of them is reported).
 NODES = (PLANT, CONTROLLER, ALLOCATOR, REFERENCE, RECORDER)
 #: The stack's nodes: each reports what it published on /diagnostics, finally as it stops.

@@ -8,6 +8,7 @@ import re
 import signal
 import sys
 import threading
+from typing import Any
 
 import rclpy
 from rclpy.context import Context
@@ -27,8 +28,10 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 
 from tiltrov_ros.core.errors import ParameterError, TiltrovError
+from tiltrov_ros.core.names import STANDBY_ENV
 
 from .base import TiltrovNode
+from .handoff import TOPICS, Handoff, Standby
 from .parameters import parameter_source, remember_init_args
 
 #: Errors that stop a node at start-up with a message and exit code 1.
@@ -154,18 +157,30 @@ def main_loop(factory: Callable[[], TiltrovNode], args: list[str] | None, name: 
         return 1
     stop = threading.Event()
     hurry = threading.Event()
+    takeover = threading.Event()
 
     def on_signal(signum: int, frame: object) -> None:
         (hurry if stop.is_set() else stop).set()
 
     previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+    standby = os.environ.get(STANDBY_ENV) == '1'
+    if standby:
+        previous[signal.SIGUSR1] = signal.signal(signal.SIGUSR1,
+                                                 lambda signum, frame: takeover.set())
     context = rclpy.get_default_context()
     remember_init_args(context, args)
     node: TiltrovNode | None = None
     executor: Executor | None = None
     code = 0
     try:
-        node = factory()
+        kwargs: dict[str, Any] = {}
+        if standby:
+            handoff = stand_by(factory, name, context, stop, takeover)
+            if handoff is None:
+                return 0
+            if TOPICS.get(name):
+                kwargs['handoff'] = handoff
+        node = factory(**kwargs)
         executor = make_executor(context)
         executor.add_node(node)
         future = until(node) if until is not None else None
@@ -198,6 +213,32 @@ def main_loop(factory: Callable[[], TiltrovNode], args: list[str] | None, name: 
             for sig, handler in previous.items():
                 signal.signal(sig, handler)
     return code
+
+
+def stand_by(factory: Any, name: str, context: Context, stop: threading.Event,
+             takeover: threading.Event) -> Handoff | None:
+    """A standby process: load the node's kernels, keep its predecessor's handoff
+    (``<name>_standby``) until SIGUSR1 (return what it kept: the node is built next)
+    or a stop signal (None)."""
+    from tiltrov_ros.core import jit
+
+    jit.warmup(getattr(factory, 'kernel_groups', ()))
+    standby = Standby(name, context)
+    executor = make_executor(context)
+    executor.add_node(standby.node)
+    standby.node.get_logger().info(f'standing by for {name} (SIGUSR1: take over)')
+    try:
+        done = Future()
+        while context.ok() and not stop.is_set() and not takeover.is_set():
+            executor.spin_until_future_complete(done, timeout_sec=STOP_POLL)
+    finally:
+        executor.shutdown()
+        standby.node.destroy_node()
+    if not takeover.is_set():
+        return None
+    print(f'{name}: taking over ({sum(len(v) for v in standby.handoff.kept.values())} '
+          'handoff messages kept)', file=sys.stderr, flush=True)
+    return standby.handoff
 
 
 def finish(node: TiltrovNode, executor: Executor, context: Context,

@@ -56,6 +56,10 @@ PLANT_PARAMS = ParamTable('plant_simulator', [
     Param('command_timeout', 'float', 0.5, 'realtime: sim seconds without a thrust_cmd after '
           'which the thrusters are commanded to zero (tilts held) until commands return; '
           '0: off', 's', low=0.0, high=3600.0),
+    Param('respawn_hold', 'float', 0.0, 'realtime, with a respawn configured (the launchers '
+          'set it): thrust_cmd older than command_timeout is held, not zeroed, until it is '
+          'this old (a respawned allocator takes over meanwhile); 0: zero thrust at '
+          'command_timeout', 's', low=0.0, high=60.0, read_only=True),
     Param('markers_period', 'float', 0.1, 'sim time between two robot_markers (at the steps '
           'that are multiples of it, a whole number of steps); 0: none', 's', low=0.0,
           high=60.0, read_only=True),
@@ -92,6 +96,7 @@ class PlantConfig:
     startup_subscribers: int
     recorder_window_ns: int          # sim ns; pacing when the recorder is a run node
     command_timeout: float = 0.5     # s, sim time; 0: off
+    respawn_hold: float = 0.0        # s, sim time: command_timeout while a respawn may hold
     markers_period_ns: int = 0                      # robot_markers; 0: none
     marker_scales: Scales = field(default_factory=Scales)
     tf: bool = True                                 # /tf and /tf_static
@@ -143,6 +148,7 @@ def declare_parameters(node: TiltrovNode) -> PlantConfig:
         scenario=v['scenario'], duration_ns=duration_ns, exit_at_end=v['exit_at_end'],
         stall_timeout=v['stall_timeout'], startup_subscribers=v['startup_subscribers'],
         recorder_window_ns=to_ns(v['recorder_window']), command_timeout=v['command_timeout'],
+        respawn_hold=v['respawn_hold'],
         markers_period_ns=markers_ns, marker_scales=Scales(*v['marker_scales']),
         tf=v['tf'], tf_thrusters=v['tf_thrusters'],
         failed_thrusters=failed, faults=scenario.faults if scenario is not None else ())

@@ -292,8 +292,12 @@ class PlantSimulator(Lockstep, TiltrovNode):
                 f'{", ".join(THRUSTERS[i] for i in failed) or "none"}')
 
     def _check_commands(self) -> None:
-        """realtime: zero thrust (tilts held) once thrust_cmd is command_timeout old."""
+        """realtime: zero thrust (tilts held) once thrust_cmd is command_timeout old (with a
+        respawn configured, ``respawn_hold`` old: the last command holds while a respawned
+        allocator takes over)."""
         timeout = self.config.command_timeout
+        if timeout > 0 and self.config.respawn_hold > 0:
+            timeout = max(timeout, self.config.respawn_hold)
         last = self._last_thrust_at
         if (last is None or timeout <= 0 or self.commands_stale
                 or self.plant.time_ns - last <= to_ns(timeout)):
@@ -303,7 +307,7 @@ class PlantSimulator(Lockstep, TiltrovNode):
         self.plant.command(thrusts=(0.0,) * 4)
         self.get_logger().warning(
             f'no thrust_cmd for {seconds(self.plant.time_ns - last):.3f} s of sim time '
-            f'(command_timeout {timeout:g} s): thrusters commanded to zero until commands '
+            f'(timeout {timeout:g} s): thrusters commanded to zero until commands '
             'return')
 
     def _state_readers(self) -> tuple[int, ...]:

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Sequence
-from dataclasses import asdict
+from dataclasses import asdict, replace
 import math
 import sys
 from typing import Any
@@ -53,6 +53,7 @@ from tiltrov_ros.core.names import (
     THRUSTERS,
     TILT_CMD,
     TILT_REQUEST,
+    TILT_TARGET,
     TILTS,
     WRENCH_ACHIEVED,
     WRENCH_CMD,
@@ -86,6 +87,7 @@ from .conversions import (
 )
 from .executors import main_loop
 from .guard import THROTTLE, guarded, input_callback
+from .handoff import HANDOFF_QOS, Handoff, tilt_target_message
 from .parameters import Overrides, check, declare, declare_failed_thrusters, declare_robot
 from .qos import PUBLISHER_QOS, RELIABLE_QOS
 from .tilt_request import TILT_REQUEST_MODES, TiltRequests, keep_bounded
@@ -110,6 +112,10 @@ ALLOCATOR_PARAMS = ParamTable('thrust_allocator', [
           'control period while the newest valid wrench_cmd is older than this; on sim time '
           'measured on /clock, else wall time since the message arrived; 0: off', 's',
           low=0.0, high=3600.0),
+    Param('respawn_hold', 'float', 0.0, 'with a respawn configured (the launchers set it): a '
+          'wrench_cmd older than wrench_timeout is held, not answered with zero thrust, '
+          'until it is this old (a respawned controller takes over meanwhile); 0: zero '
+          'thrust at wrench_timeout', 's', low=0.0, high=60.0, read_only=True),
     Param('tilt_source', 'str', 'commanded', 'tilts each allocation starts from (and moves '
           'at most max_tilt_step away from): commanded, the last answer; measured, the '
           'servos\' positions in joint_states (the one stamped with the wrench, else the '
@@ -135,9 +141,13 @@ class ThrustAllocatorNode(TiltRequests, TiltrovNode):
 
     def __init__(self, *, node_name: str = ALLOCATOR, namespace: str | None = None,
                  context: Any = None, cli_args: Sequence[str] | None = None,
-                 parameter_overrides: Overrides = None) -> None:
+                 parameter_overrides: Overrides = None, handoff: Handoff | None = None
+                 ) -> None:
         super().__init__(node_name, namespace=namespace, context=context, cli_args=cli_args,
                          parameter_overrides=parameter_overrides)
+        #: What a standby kept of this node's predecessor (nodes/handoff.py).
+        self.handoff = handoff
+        self.resumed_from: int | None = None
         self._declare_parameters()
         self.failed: tuple[int, ...] = ()       # failed thrusters the allocator knows
         self.allocator = self.allocator_config.build(self.robot, self.control_period)
@@ -154,6 +164,8 @@ class ThrustAllocatorNode(TiltRequests, TiltrovNode):
         self._thrust_pub = self.create_safe_publisher(
             JointState, THRUST_CMD, PUBLISHER_QOS,
             lambda msg: self._safe_msgs(stamp_ns(msg.header.stamp))[2])
+        # The servo travel under way, for a successor (nodes/handoff.py), before each answer.
+        self._target_pub = self.create_safe_publisher(JointState, TILT_TARGET, HANDOFF_QOS)
         # The answers go out as serialized templates (nodes/serialized.py).
         self._achieved_pub.serialize_as(*wrench_template())
         self._tilt_pub.serialize_as(*joint_template(TILTS, 'position'))
@@ -213,7 +225,8 @@ class ThrustAllocatorNode(TiltRequests, TiltrovNode):
         shipped = load_allocator_config()
         declare(self, ALLOCATION, defaults=asdict(shipped))
         own = declare(self, ALLOCATOR_PARAMS, only=('tilt_request', 'input_timeout',
-                                                  'wrench_timeout', 'wrench_tolerance',
+                                                  'wrench_timeout', 'respawn_hold',
+                                                  'wrench_tolerance',
                                                   'tilt_source'))
         self.failed_param = declare_failed_thrusters(self)
         own.update(declare(self, ALLOCATOR_PARAMS, only=('scenario',)))
@@ -226,6 +239,7 @@ class ThrustAllocatorNode(TiltRequests, TiltrovNode):
         self.tilt_request_mode = own['tilt_request']
         self.input_timeout = own['input_timeout']
         self.wrench_timeout = own['wrench_timeout']
+        self.respawn_hold = own['respawn_hold']
         self.wrench_tolerance = own['wrench_tolerance']
         self.tolerances = shortfall_tolerances(self.robot, self.wrench_tolerance)
         self.measured_tilts = own['tilt_source'] == 'measured'
@@ -358,8 +372,35 @@ class ThrustAllocatorNode(TiltRequests, TiltrovNode):
 
     # -- allocation ------------------------------------------------------------------
 
+    def _resume(self, ns: int) -> None:
+        """The first wrench of a respawned allocator: start from its predecessor's last
+        answer before ``ns`` (its commanded tilts, and the travel under way then)."""
+        handoff, self.handoff = self.handoff, None
+        if handoff is None:
+            return
+        got = handoff.before(TILT_CMD, ns, JointState)
+        if got is None:
+            self.get_logger().warning(f'no tilt_cmd of a predecessor before {format_ns(ns)}: '
+                                      'allocating afresh')
+            return
+        stamp, cmd = got
+        target = handoff.before(TILT_TARGET, stamp + 1, JointState)
+        travel = (tuple(target[1].position) if target is not None and target[0] == stamp
+                  and list(target[1].name) == list(TILTS) else None)
+        self.previous = replace(from_tilts(None, joint_state_values(cmd, TILTS, 'position')),
+                                method='transit' if travel else 'previous',
+                                target=travel)      # type: ignore[arg-type]
+        self.resumed_from = stamp
+        self.get_logger().info(
+            f'resumed from its predecessor\'s answer at {format_ns(stamp)}'
+            + (f', travelling to {travel}' if travel else '')
+            + ('' if stamp == ns - to_ns(self.control_period)
+               else f' (not the tick before {format_ns(ns)}: not bumpless)'))
+
     def _allocate(self, ns: int, wrench: FloatArray, request: tuple[float, float] | None) -> None:
         self._waiting = None
+        if self.handoff is not None:
+            self._resume(ns)
         if self.scenario_faults:
             self._use_failed(self._wanted_failed(ns), f'at {format_ns(ns)} (scenario)')
         start = self._start(ns)
@@ -384,6 +425,8 @@ class ThrustAllocatorNode(TiltRequests, TiltrovNode):
         error = float(result.error)
         if math.isfinite(error):
             self.max_error = max(self.max_error, error)
+        self._target_pub.publish(tilt_target_message(
+            ns, result.target if result.method == 'transit' else None))
         self._answer(ns, result.thrusts, (result.tilt_front, result.tilt_rear),
                      result.achieved)
         self._handling = None
@@ -481,7 +524,10 @@ class ThrustAllocatorNode(TiltRequests, TiltrovNode):
     @guarded
     def _wrench_watchdog(self) -> None:
         """Zero thrust, tilts held, while wrench_cmd is stale (not cached)."""
-        seen = self.wrench_watchdog.expired(self.wrench_timeout)
+        timeout = self.wrench_timeout
+        if timeout > 0 and self.respawn_hold > 0:
+            timeout = max(timeout, self.respawn_hold)     # a respawned controller may come
+        seen = self.wrench_watchdog.expired(timeout)
         if seen is None:
             return
         self.watchdog_outputs += 1
@@ -555,6 +601,7 @@ class ThrustAllocatorNode(TiltRequests, TiltrovNode):
             'wrench_stale': self.wrench_watchdog.stale,
             'wrench_stale_events': self.wrench_watchdog.events,
             'watchdog_zero_thrusts': self.watchdog_outputs,
+            'resumed_from': seconds(self.resumed_from) if self.resumed_from is not None else '',
         }
 
 

@@ -44,6 +44,7 @@ from tiltrov_ros.core.controllers import (
     SWITCHING,
     ControllerConfig,
     ControlOutput,
+    PIDController,
     Reference,
     load_controller_config,
     make_controller,
@@ -60,6 +61,7 @@ from tiltrov_ros.core.names import (
     LOCKSTEP,
     MODES,
     ODOM,
+    PID_INTEGRAL,
     PLANT,
     REALTIME,
     SETPOINT,
@@ -91,10 +93,12 @@ from .conversions import (
     pose_arrays,
     stamp_ns,
     twist_array,
+    wrench_array,
     wrench_template,
 )
 from .executors import main_loop
 from .guard import THROTTLE, guarded, input_callback
+from .handoff import HANDOFF_QOS, Handoff, pid_integral_message
 from .handshake import END_KEY
 from .parameters import Overrides, check, declare, declare_robot
 from .qos import PUBLISHER_QOS, RELIABLE_QOS, reader_qos
@@ -146,15 +150,19 @@ def _config_mapping(get: Any) -> dict[str, Any]:
 
 
 class WrenchController(AchievedInput, TiltrovNode):
-    """The wrench controller (see the module docstring)."""
+    """The wrench controller (see the module docstring). ``handoff``: what a standby
+    kept of the predecessor of this node (nodes/handoff.py): the pid resumes from it."""
 
     kernel_groups = ('control',)
 
     def __init__(self, *, node_name: str = CONTROLLER, namespace: str | None = None,
                  context: Any = None, cli_args: Sequence[str] | None = None,
-                 parameter_overrides: Overrides = None) -> None:
+                 parameter_overrides: Overrides = None, handoff: Handoff | None = None
+                 ) -> None:
         super().__init__(node_name, namespace=namespace, context=context, cli_args=cli_args,
                          parameter_overrides=parameter_overrides)
+        self.handoff = handoff
+        self.resumed_from: int | None = None      # the predecessor's tick resumed from
         self._declare_parameters()
         self.period_ns = to_ns(self.control_period)
         self.controller = make_controller(self.controller_config, self.robot)
@@ -171,6 +179,9 @@ class WrenchController(AchievedInput, TiltrovNode):
             lambda msg: fill_joint_state(new_joint_state(TILTS), stamp_ns(msg.header.stamp),
                                          position=self._safe_tilts))
             if self.kind == 'switching' else None)
+        # The pid's handoff to a successor (nodes/handoff.py), before each wrench.
+        self._integral_pub = (self.create_safe_publisher(JointState, PID_INTEGRAL, HANDOFF_QOS)
+                              if self.kind == 'pid' else None)
         # The answers go out as serialized templates (nodes/serialized.py).
         self._wrench_pub.serialize_as(*wrench_template())
         if self._tilt_pub is not None:
@@ -413,6 +424,8 @@ class WrenchController(AchievedInput, TiltrovNode):
                 velocity = (self._latest_velocity[1] if self.use_velocity
                             and self._latest_velocity is not None else np.zeros(6))
         self._tick = None
+        if self.handoff is not None:
+            self._resume(ns)
         reference = Reference(setpoint[0], setpoint[1], velocity)
         out = self.controller.update(seconds(ns), tick.position, tick.quaternion, tick.nu,
                                      reference, achieved=self.achieved_of_last())
@@ -421,8 +434,32 @@ class WrenchController(AchievedInput, TiltrovNode):
             for stamp in [s for s in buffer if s < ns]:
                 del buffer[stamp]
 
+    def _resume(self, ns: int) -> None:
+        """The first tick of a respawned controller: the pid continues from the state its
+        predecessor had after the tick before ``ns`` (the handoff a standby kept)."""
+        handoff, self.handoff = self.handoff, None
+        if handoff is None or not isinstance(self.controller, PIDController):
+            return
+        got = handoff.before(PID_INTEGRAL, ns, JointState)
+        if got is None:
+            self.get_logger().warning(f'no pid_integral of a predecessor before '
+                                      f'{format_ns(ns)}: the integral starts from zero')
+            return
+        stamp, msg = got
+        last = handoff.before(WRENCH_CMD, stamp + 1, WrenchStamped)
+        self.controller.resume(seconds(stamp), list(msg.position),
+                               wrench_array(last[1]) if last and last[0] == stamp else None)
+        self.resumed_from = stamp
+        self.get_logger().info(f'resumed the pid from its predecessor\'s integral after '
+                               f'{format_ns(stamp)}' + ('' if stamp == ns - self.period_ns
+                                                        else f' (not the tick before '
+                                                        f'{format_ns(ns)}: not bumpless)'))
+
     def _answer(self, ns: int, out: ControlOutput) -> None:
         wrench = fill_wrench(new_wrench(), ns, out.wrench)
+        if self._integral_pub is not None and isinstance(self.controller, PIDController):
+            self._integral_pub.publish(pid_integral_message(
+                ns, self.controller.integral, self.controller.gains.ki))
         tilt_msg = None
         if self._tilt_pub is not None:
             tilts = out.tilt_request if out.tilt_request is not None else self._last_tilts
@@ -551,6 +588,7 @@ class WrenchController(AchievedInput, TiltrovNode):
             'resets': self.resets, 'odom_stale': self.odom_watchdog.stale,
             'odom_stale_events': self.odom_watchdog.events,
             'watchdog_zero_wrenches': self.watchdog_outputs,
+            'resumed_from': seconds(self.resumed_from) if self.resumed_from is not None else '',
         }
 
 

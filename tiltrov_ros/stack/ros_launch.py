@@ -33,6 +33,7 @@ from dataclasses import replace
 import os
 from pathlib import Path
 import shutil
+import signal
 import tempfile
 from typing import Any
 
@@ -45,7 +46,7 @@ from launch.actions import (
 )
 from launch.event_handlers import OnProcessExit, OnShutdown
 from launch.events import Shutdown
-from launch.events.process import ProcessExited, ShutdownProcess
+from launch.events.process import ProcessExited, ShutdownProcess, SignalProcess
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
@@ -54,6 +55,7 @@ from tiltrov_ros.core.names import (
     MODES,
     PLANT,
     RECORDER,
+    STANDBY_ENV,
     TF_REMAPPINGS,
     normalize_namespace,
 )
@@ -62,6 +64,7 @@ from tiltrov_ros.core.runner import StackConfig
 from tiltrov_ros.core.timebase import NS_PER_S
 
 from .specs import (
+    RESPAWNABLE,
     LaunchError,
     LaunchOptions,
     NodeSpec,
@@ -88,6 +91,8 @@ ARGUMENTS = {
     'namespace': ('', 'namespace pushed on every node and relative topic'),
     'record': ('', 'bag directory to record every topic into (must not exist); empty: none'),
     'markers': ('true', 'true: the plant publishes robot_markers (for RViz and Foxglove)'),
+    'respawn': ('', 'comma-separated nodes taken over by a standby when they die mid-run '
+                    f'({", ".join(RESPAWNABLE)}); empty: none'),
 }
 
 
@@ -112,13 +117,18 @@ def options_from(values: dict[str, str]) -> LaunchOptions:
         raise LaunchError(f'real_time_factor:={factor:g}: must be > 0')
     if values['markers'] not in ('true', 'false'):
         raise LaunchError(f'markers:={values["markers"]!r}: allowed: true or false')
+    respawn = tuple(n for n in values['respawn'].split(',') if n)
+    unknown = [n for n in respawn if n not in RESPAWNABLE]
+    if unknown:
+        raise LaunchError(f'respawn:={values["respawn"]!r}: {", ".join(unknown)} cannot be '
+                          f'respawned; allowed: {", ".join(RESPAWNABLE)}')
     return LaunchOptions(
         scenario=values['scenario'], controller=values['controller'] or None,
         allocator=values['allocator'] or None, duration=duration,
         robot=values['robot'] or None, lockstep=mode == LOCKSTEP,
         real_time_factor=factor, record=Path(values['record']) if values['record'] else None,
         namespace=values['namespace'], launcher='ros2 launch',
-        markers=values['markers'] == 'true')
+        markers=values['markers'] == 'true', respawn=respawn)
 
 
 def _stack(context: LaunchContext) -> list[Any]:
@@ -140,23 +150,30 @@ def _stack(context: LaunchContext) -> list[Any]:
     nodes = {spec.name: _node(spec, namespace) for spec in specs}
     if rsp:
         nodes[ROBOT_STATE_PUBLISHER] = _robot_state_publisher(config, namespace)
-    watcher = _EndOfRun(nodes)
+    respawned = {spec.name: spec for spec in specs if spec.name in options.respawn}
+    watcher = _EndOfRun(nodes, respawned, namespace)
     actions += list(nodes.values())
     actions += [RegisterEventHandler(OnProcessExit(target_action=node, on_exit=watcher.exited))
                 for node in nodes.values()]
+    for name in respawned:
+        actions += watcher.new_standby(name)
     return actions
 
 
-def _node(spec: NodeSpec, namespace: str) -> Node:
+def _node(spec: NodeSpec, namespace: str, *, standby: bool = False) -> Node:
     # A stopping node of the run waits until the recorder has its last messages (the
     # recorder until it has every node's): SIGTERM only bounds a hang, as in tiltrov
     # launch (13 s, the recorder 20 s). The shipped Fast DDS profile, unless one is set.
     extra: dict[str, Any] = {'sigterm_timeout': str(
         RECORDER_STOP_TIMEOUT if spec.name == RECORDER else STOP_TIMEOUTS[0])}
     env = dds_environment(os.environ)
+    if standby:
+        # Its own node name until it takes over (no __node remapping: the node it builds
+        # then keeps the node's name); the environment makes it a standby.
+        env[STANDBY_ENV] = '1'
     if env:
         extra['additional_env'] = env
-    return Node(package=PACKAGE, executable=spec.name, name=spec.name,
+    return Node(package=PACKAGE, executable=spec.name, name=None if standby else spec.name,
                 namespace=namespace or None, output='screen',
                 parameters=[*(str(path) for path in spec.params_files), spec.all_overrides()],
                 remappings=list(TF_REMAPPINGS) if namespace else None, **extra)
@@ -187,23 +204,48 @@ def _robot_state_publisher(config: StackConfig, namespace: str) -> Node:
 
 
 class _EndOfRun:
-    """Ends the launch when the plant has finished the run (see the module docstring)."""
+    """Ends the launch when the plant has finished the run (see the module docstring);
+    a respawned node's exit hands over to its standby (SIGUSR1) and starts a new one."""
 
-    def __init__(self, nodes: dict[str, Node]) -> None:
+    def __init__(self, nodes: dict[str, Node], respawned: dict[str, NodeSpec],
+                 namespace: str) -> None:
         self.nodes = nodes
         self.names = {id(node): name for name, node in nodes.items()}
         self.running = set(nodes)
         self.finished = False
+        self.respawned = respawned
+        self.namespace = namespace
+        self.standbys: dict[str, Node] = {}
+
+    def new_standby(self, name: str) -> list[Any]:
+        """The actions that start a standby of ``name`` and watch it."""
+        standby = _node(self.respawned[name], self.namespace, standby=True)
+        self.standbys[name] = standby
+        return [standby, RegisterEventHandler(OnProcessExit(target_action=standby,
+                                                            on_exit=self.exited))]
+
+    def _take_over(self, name: str) -> list[Any]:
+        standby = self.standbys.pop(name)
+        self.nodes[name] = standby
+        self.names[id(standby)] = name
+        self.running.add(name)
+        return [EmitEvent(event=SignalProcess(signal_number=signal.SIGUSR1,
+                                              process_matcher=_is(standby))),
+                *self.new_standby(name)]
 
     def _stop(self, names: list[str]) -> list[Any]:
         return [EmitEvent(event=ShutdownProcess(process_matcher=_is(self.nodes[name])))
                 for name in names]
 
     def exited(self, event: ProcessExited, context: LaunchContext) -> list[Any] | None:
-        name = self.names.get(id(event.action), '?')
+        if id(event.action) not in self.names:      # a standby that never took over
+            return None
+        name = self.names[id(event.action)]
         self.running.discard(name)
         if context.is_shutdown:
             return None
+        if name in self.respawned and not self.finished and name in self.standbys:
+            return self._take_over(name)
         if event.returncode != 0:
             raise LaunchError(f'{name} exited with code {event.returncode}')
         if name == PLANT:

@@ -39,6 +39,9 @@ from tiltrov_ros.paths import config_dir, config_file
 #: Where the recorder node lives; ``--record`` starts it.
 RECORDER_MODULE = 'tiltrov_ros.nodes.bag_recorder'
 
+#: s of sim time: with ``--respawn``, how long the plant and the allocator hold the last
+#: command (instead of zero thrust) while a respawned node takes over (realtime).
+RESPAWN_HOLD = 3.0
 #: Nodes ``--respawn`` may start again (the plant holds the run's state).
 RESPAWNABLE = (CONTROLLER, ALLOCATOR, REFERENCE)
 #: The environment variables naming a Fast DDS profiles file (Fast DDS 2 reads the first).
@@ -215,6 +218,9 @@ def stack_specs(options: LaunchOptions, *, config_dir: Path | None = None,
     if options.record is not None and options.respawn:
         # A node may be killed: the plant uses no command before the bag has it.
         plant['recorder_window'] = 0.0
+    if options.respawn:
+        # Realtime: the last command holds while a respawned node takes over.
+        plant['respawn_hold'] = RESPAWN_HOLD
     if options.stall_timeout is not None:
         plant['stall_timeout'] = float(options.stall_timeout)
     if not options.markers:
@@ -227,6 +233,8 @@ def stack_specs(options: LaunchOptions, *, config_dir: Path | None = None,
         'scenario': scenario_param, **run, **sim, **robot}
     if options.allocator is not None:
         allocator['mode'] = options.allocator
+    if options.respawn:
+        allocator['respawn_hold'] = RESPAWN_HOLD
     reference = {'scenario': scenario_param, 'duration': duration, **run, **sim, **robot}
 
     def spec(name: str, module: str, cls: str, overrides: dict[str, Any]) -> NodeSpec:

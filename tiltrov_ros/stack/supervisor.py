@@ -34,6 +34,7 @@ from tiltrov_ros import paths
 from tiltrov_ros.core.names import (
     PLANT,
     RECORDER,
+    STANDBY_ENV,
 )
 
 from .specs import NodeSpec
@@ -184,27 +185,60 @@ class _Supervisor:
         self.monitor = monitor
         self.status = status
         self.children: list[_Child] = []
+        #: node name -> its standby process (``--respawn``: nodes/handoff.py)
+        self.standbys: dict[str, _Child] = {}
         self.starts: dict[str, int] = {}
 
-    def start(self, spec: NodeSpec) -> _Child:
+    def start(self, spec: NodeSpec, *, standby: bool = False) -> _Child:
+        """Start ``spec``'s node, or (``standby``) its standby: the same executable and
+        arguments, which loads its kernels, keeps the node's handoff and takes over on
+        SIGUSR1."""
         argv = executable(spec) + spec.ros_args(spec.write_overrides(self.workdir,
                                                                      self.namespace),
                                                  self.namespace)
+        label = f'{spec.name}_standby' if standby else spec.name
+        env = dict(self.env, **({STANDBY_ENV: '1'} if standby else {}))
         process = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                                   stderr=subprocess.STDOUT, env=self.env,
+                                   stderr=subprocess.STDOUT, env=env,
                                    start_new_session=True, preexec_fn=_die_with_parent)
-        pump = threading.Thread(target=self.out.pump, args=(spec.name, process.stdout),
+        pump = threading.Thread(target=self.out.pump, args=(label, process.stdout),
                                 daemon=True)
         pump.start()
-        self.starts[spec.name] = self.starts.get(spec.name, 0) + 1
-        self.out.line('launch', f'started {spec.name} (pid {process.pid})')
+        self.starts[label] = self.starts.get(label, 0) + 1
+        self.out.line('launch', f'started {label} (pid {process.pid})')
         return _Child(spec, process, pump)
 
+    def respawn_node(self, i: int, rc: int) -> None:
+        """The node of ``children[i]`` died: its standby takes over (SIGUSR1) and a new
+        standby starts; without a live standby, the node starts again."""
+        child = self.children[i]
+        name = child.spec.name
+        child.pump.join(timeout=2.0)
+        standby = self.standbys.pop(name, None)
+        if standby is not None and standby.process.poll() is None:
+            self.out.line('launch', f'{name} died (exit code {rc}); its standby (pid '
+                                    f'{standby.process.pid}) takes over (--respawn)')
+            standby.process.send_signal(signal.SIGUSR1)
+            self.children[i] = standby
+            self.starts[name] += 1
+        else:
+            self.out.line('launch', f'{name} died (exit code {rc}); starting it again '
+                                    '(--respawn)')
+            self.children[i] = self.start(child.spec)
+        self.standbys[name] = self.start(child.spec, standby=True)
+        self.report('running')
+
+    def every_process(self) -> list[_Child]:
+        return [*self.children, *self.standbys.values()]
+
     def report(self, state: str, code: int | None = None) -> None:
-        self.status.write(state, {c.spec.name: {'pid': c.process.pid,
-                                                'starts': self.starts[c.spec.name],
-                                                'running': c.process.poll() is None}
-                                  for c in self.children}, code)
+        nodes = {c.spec.name: {'pid': c.process.pid, 'starts': self.starts[c.spec.name],
+                               'running': c.process.poll() is None} for c in self.children}
+        nodes.update({f'{name}_standby': {'pid': c.process.pid,
+                                          'starts': self.starts[f'{name}_standby'],
+                                          'running': c.process.poll() is None}
+                      for name, c in self.standbys.items()})
+        self.status.write(state, nodes, code)
 
     def watch(self, summary: str, started: float) -> int:
         """Until the plant ends the run (EXIT_OK) or a node not respawned dies (EXIT_FAILED);
@@ -223,11 +257,7 @@ class _Supervisor:
                                             'the other nodes')
                     return EXIT_OK
                 if name in self.respawn:
-                    child.pump.join(timeout=2.0)
-                    self.out.line('launch', f'{name} died (exit code {rc}); starting it again '
-                                            '(--respawn)')
-                    self.children[i] = self.start(child.spec)
-                    self.report('running')
+                    self.respawn_node(i, rc)
                     continue
                 self.out.line('launch', f'{name} died (exit code {rc}); stopping the other '
                                         'nodes')
@@ -273,6 +303,9 @@ def run_processes(specs: Sequence[NodeSpec], namespace: str, out: Output,
         for spec in specs:
             supervisor.children.append(supervisor.start(spec))
             supervisor.report('starting')
+        for spec in specs:
+            if spec.name in respawn:
+                supervisor.standbys[spec.name] = supervisor.start(spec, standby=True)
         supervisor.report('running')
         code = supervisor.watch(summary, started)
     except _Stop as stop:
@@ -282,7 +315,7 @@ def run_processes(specs: Sequence[NodeSpec], namespace: str, out: Output,
         stopping.set()              # from here on a signal only hurries the stop
         supervisor.report('stopping')
         try:
-            _stop_children(supervisor.children, out, hurry)
+            _stop_children(supervisor.every_process(), out, hurry)
         finally:
             for sig, handler in previous.items():
                 signal.signal(sig, handler)
