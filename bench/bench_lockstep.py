@@ -59,9 +59,13 @@ def _launch_argv(*args: str) -> list[str]:
 
 
 def lockstep(scenario: str, duration: float | None, *, single_process: bool,
-             executor: str, markers: bool = True) -> dict[str, float]:
-    """One ``tiltrov launch`` in lockstep; the plant's real-time factor."""
-    args = ['--scenario', scenario, '--executor', executor]
+             executor: str, markers: bool = True, controller: str | None = None,
+             extra: tuple[str, ...] = ()) -> dict[str, float]:
+    """One ``tiltrov launch`` in lockstep (``extra`` arguments added); the plant's
+    real-time factor."""
+    args = ['--scenario', scenario, '--executor', executor, *extra]
+    if controller is not None:
+        args += ['--controller', controller]
     if not markers:
         args.append('--no-markers')
     if duration is not None:

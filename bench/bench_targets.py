@@ -79,10 +79,19 @@ ROWS = [
     Row('allocator node, publish to publish p99 (separate processes)', 'latency',
         'allocator_p99_ms', 'ms', 0.5, True),
     Row('station-keeping campaign, 2 workers (wall)', 'campaign', 'wall_s', 's', 60.0, True),
+    Row('short launch: pitch_hold 0.1 s, separate processes (wall)', 'stack',
+        'short_launch_s', 's', 4.0, True),
+    Row('recorded / unrecorded lockstep RTF (current_hold pid, 60 s)', 'stack',
+        'recorded_ratio', 'x', 0.5, False),
+    Row('recorded / unrecorded, --respawn: paced tick by tick', 'stack',
+        'respawn_ratio', 'x', math.nan, False),
+    Row('bag_recorder: messages written per second (flat out)', 'recorder',
+        'written_per_s', '/s', 50_000.0, False),
 ]
-MEASURES = ('allocation', 'plant', 'pid', 'headless', 'lockstep', 'latency', 'campaign')
+MEASURES = ('allocation', 'plant', 'pid', 'headless', 'lockstep', 'latency', 'campaign',
+            'stack', 'recorder')
 #: Measures of minutes: run --slow-repeat times (default once) instead of --repeat.
-SLOW = ('lockstep', 'latency', 'campaign')
+SLOW = ('lockstep', 'latency', 'campaign', 'stack', 'recorder')
 
 
 # --------------------------------------------------------------------------- child measures
@@ -277,6 +286,42 @@ def measure_campaign(args: argparse.Namespace) -> dict[str, Any]:
     return {'wall_s': wall, 'samples': args.campaign_samples}
 
 
+def measure_stack(args: argparse.Namespace) -> dict[str, Any]:
+    """The whole stack's wall times: the short launch (process start, the handshake, the
+    run, the stop; median of 3) and a 60 s current_hold pid run unrecorded, recorded (the
+    recorder paces it, 1 s window) and recorded with --respawn (window 0): plant RTFs."""
+    bl = _bench_module('bench_lockstep')
+    walls = []
+    for _ in range(3):
+        start = time.perf_counter()
+        result = subprocess.run([sys.executable, '-m', 'tiltrov_ros.cli', 'launch', '--scenario',
+                                 'pitch_hold', '--duration', '0.1'], capture_output=True,
+                                text=True, timeout=600, cwd=tempfile.gettempdir())
+        walls.append(time.perf_counter() - start)
+        if result.returncode != 0:
+            raise RuntimeError(f'the short launch failed: {result.stdout[-2000:]}')
+    out: dict[str, Any] = {'short_launch_s': float(np.median(walls))}
+    runs = {'unrecorded': (), 'recorded': ('--record',), 'respawn': ('--record', '--respawn',
+                                                                     'thrust_allocator')}
+    for key, extra in runs.items():
+        with tempfile.TemporaryDirectory() as tmp:
+            args_ = [a if a != '--record' else f'--record={Path(tmp) / "bag"}' for a in extra]
+            out[f'{key}_rtf'] = bl.lockstep('current_hold', 60.0, single_process=False,
+                                            executor='events', controller='pid',
+                                            extra=tuple(args_))['rtf']
+    out['recorded_ratio'] = out['recorded_rtf'] / out['unrecorded_rtf']
+    out['respawn_ratio'] = out['respawn_rtf'] / out['unrecorded_rtf']
+    return out
+
+
+def measure_recorder(args: argparse.Namespace) -> dict[str, Any]:
+    """bag_recorder fed flat out by a KEEP_ALL publisher process (bench_recorder)."""
+    br = _bench_module('bench_recorder')
+    with tempfile.TemporaryDirectory() as tmp:
+        got = br.bench_recorder(60_000, 0, 0.0, Path(tmp) / 'bag')
+    return {'written_per_s': got['rate'], 'lost': got['lost']}
+
+
 def measure_node(args: argparse.Namespace) -> dict[str, Any]:
     """One stack node's constructor (shipped parameters) and its kernel warm-up, s."""
     import rclpy
@@ -299,7 +344,8 @@ def measure_node(args: argparse.Namespace) -> dict[str, Any]:
 
 CHILDREN = {'allocation': measure_allocation, 'plant': measure_plant, 'pid': measure_pid,
             'headless': measure_headless, 'lockstep': measure_lockstep,
-            'latency': measure_latency, 'campaign': measure_campaign, 'node': measure_node}
+            'latency': measure_latency, 'campaign': measure_campaign, 'stack': measure_stack,
+            'recorder': measure_recorder, 'node': measure_node}
 
 
 # --------------------------------------------------------------------------- the parent
@@ -390,7 +436,8 @@ def table(results: dict[str, dict[str, Any]]) -> list[str]:
         ref = results.get(f'{row.measure}:numpy', {})
         value, base = fast.get(row.key, math.nan), ref.get(row.key, math.nan)
         unit = '' if row.unit == 'x' else row.unit
-        target = (f'{"<=" if row.lower_is_better else ">="} '
+        target = ('(reported)' if math.isnan(row.target) else
+                  f'{"<=" if row.lower_is_better else ">="} '
                   f'{_fmt(row.target, row.unit) if unit == "/s" else f"{row.target:g} {unit}"}')
         if 'error' in fast:
             lines.append(f'| {row.label} | {target} | failed: {fast["error"]} | '
@@ -398,7 +445,7 @@ def table(results: dict[str, dict[str, Any]]) -> list[str]:
             continue
         speedup = (base / value if row.lower_is_better else value / base) \
             if value and base else math.nan
-        met = '-' if math.isnan(value) else (
+        met = '-' if math.isnan(value) or math.isnan(row.target) else (
             'yes' if (value <= row.target if row.lower_is_better else value >= row.target)
             else 'no')
         lines.append(f'| {row.label} | {target} | {_fmt(value, row.unit)} | '

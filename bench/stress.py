@@ -11,10 +11,20 @@ does to the stack, beside CPU-bound busy loops (``python3 -c 'while True: pass'`
   ``assert_same_run``; the contract is 1e-9);
 * ``realtime``: a recorded realtime ``current_hold`` pid run, quiet and beside the busy
   loops: the largest position error (norm) and attitude error after t = 8 s, from the
-  bag's odometry.
+  bag's odometry;
+* ``restarts``: per launch path (``tiltrov launch --respawn``, and ``ros2 launch
+  respawn:=`` where the ros2 command line is installed: the package colcon-built in a
+  temporary workspace), the allocator killed about 10 s and the controller about 17 s
+  into a recorded realtime ``current_hold`` pid run, ``--restart-tries`` times quiet and
+  beside the busy loops, each with the same run without kills: its errors after t = 8 s
+  against that run's (the bound: + 50 mm, + 3 deg); and ``--lockstep-kills`` recorded
+  120 s lockstep runs with both killed at seeded random sim times: the largest
+  difference from the headless run without kills (the contract: 0) and steps or ticks
+  missing from the bag.
 
-Run ``.venv/bin/python bench/stress.py [--only short recorded realtime] [--busy 2]``;
-the numbers go to ``--out`` (default ``runs/stress/stress.json``) and stdout.
+Run ``.venv/bin/python bench/stress.py [--only short recorded realtime restarts]
+[--busy 2]``; the numbers go to ``--out`` (default ``runs/stress/stress.json``) and
+stdout.
 """
 
 from __future__ import annotations
@@ -144,10 +154,158 @@ def realtime(busy: int, duration: float = 30.0) -> dict[str, Any]:
     return out
 
 
+# --------------------------------------------------------------------------- restarts
+
+RUN = ('--scenario', 'current_hold', '--controller', 'pid')
+VICTIMS = ('thrust_allocator', 'wrench_controller')
+
+
+def _workspace(root: Path) -> dict[str, str] | None:
+    """The environment of the package colcon-built in ``root`` (None: no ros2 launch)."""
+    import shutil
+
+    if shutil.which('ros2') is None and not Path(sys.executable).with_name('ros2').exists():
+        return None
+    repo = Path(__file__).resolve().parent.parent
+    shutil.copytree(repo, root / 'src' / 'tiltrov_ros', ignore=shutil.ignore_patterns(
+        '.venv', '.git', 'build', 'install', 'log', 'runs', '__pycache__', '*.egg-info'))
+    env = dict(os.environ, PATH=os.pathsep.join([str(Path(sys.executable).parent),
+                                                os.environ.get('PATH', '')]))
+    colcon = shutil.which('colcon') or str(Path(sys.executable).with_name('colcon'))
+    if subprocess.run([colcon, 'build'], cwd=root, env=env, capture_output=True).returncode:
+        return None
+    sourced = subprocess.run(['bash', '-c', 'source install/setup.bash && env -0'], cwd=root,
+                             env=env, capture_output=True, text=True, check=True)
+    env = dict(line.split('=', 1) for line in sourced.stdout.split('\0') if '=' in line)
+    env['AMENT_PREFIX_PATH'] = os.pathsep.join(
+        [*filter(None, env.get('AMENT_PREFIX_PATH', '').split(os.pathsep)), sys.prefix])
+    return env
+
+
+def _start(path: str, bag: Path, extra: Sequence[str], kills: bool, env: dict[str, str] | None,
+           cwd: Path) -> subprocess.Popen[str]:
+    if path == 'tiltrov launch':
+        respawn = [a for v in VICTIMS for a in ('--respawn', v)] if kills else []
+        argv = [sys.executable, '-m', 'tiltrov_ros.cli', 'launch', *RUN, *extra, *respawn,
+                '--record', str(bag), '--status-file', str(cwd / 'status.json')]
+    else:
+        mode = 'mode:=realtime' if '--realtime' in extra else 'mode:=lockstep'
+        duration = extra[extra.index('--duration') + 1]
+        argv = [str(Path(sys.executable).with_name('ros2')), 'launch', 'tiltrov_ros',
+                'tiltrov.launch.py', 'scenario:=current_hold', 'controller:=pid', mode,
+                f'duration:={duration}', f'record:={bag}',
+                *((f'respawn:={",".join(VICTIMS)}',) if kills else ())]
+    log = (cwd / 'launch.log').open('w')
+    return subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT, text=True, env=env,
+                            cwd=cwd, start_new_session=True)
+
+
+def _pid_of(path: str, victim: str, cwd: Path) -> int | None:
+    if path == 'tiltrov launch':
+        try:
+            return int(json.loads((cwd / 'status.json').read_text())['nodes'][victim]['pid'])
+        except (OSError, KeyError, ValueError):
+            return None
+    found = re.search(rf'\[{victim}-\d+\]: process started with pid \[(\d+)\]',
+                      (cwd / 'launch.log').read_text())
+    return int(found[1]) if found else None
+
+
+def _run_with_kills(path: str, extra: Sequence[str], kill_at: Sequence[float],
+                    env: dict[str, str] | None, tmp: Path) -> tuple[int, Path, str]:
+    """One recorded run, the victims killed when the sim time reaches ``kill_at`` (none
+    when empty): exit code, bag, output."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+
+    from tiltrov_ros.core.timebase import NS_PER_S
+    from tiltrov_ros.nodes.conversions import stamp_ns
+
+    cwd = Path(tempfile.mkdtemp(dir=tmp))
+    bag = cwd / 'bag'
+    proc = _start(path, bag, extra, bool(kill_at), env, cwd)
+    context = Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node('stress_sim_time', context=context)
+    now = [-1]
+    from nav_msgs.msg import Odometry
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    node.create_subscription(Odometry, 'odom', lambda m: now.__setitem__(
+        0, stamp_ns(m.header.stamp)), QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE))
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    try:
+        for victim, at in zip(VICTIMS, kill_at):
+            while now[0] < at * NS_PER_S and proc.poll() is None:
+                executor.spin_once(timeout_sec=0.05)
+            pid = _pid_of(path, victim, cwd)
+            if pid is not None and proc.poll() is None:
+                os.kill(pid, 9)
+        code = proc.wait(timeout=1800)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, 9)
+            proc.wait()
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+    return code, bag, (cwd / 'launch.log').read_text()
+
+
+def restarts(tries: int, lockstep_kills: int, busy: int, seed: int = 2026) -> dict[str, Any]:
+    """See the module docstring."""
+    from tiltrov_ros.bag.losses import missing_stamps
+
+    rng = np.random.default_rng(seed)
+    out: dict[str, Any] = {}
+    with tempfile.TemporaryDirectory() as tmp_dir:
+        tmp = Path(tmp_dir)
+        paths: dict[str, dict[str, str] | None] = {'tiltrov launch': None}
+        ws = _workspace(tmp / 'ws')
+        if ws is not None:
+            paths['ros2 launch'] = ws
+        for path, env in paths.items():
+            rows: dict[str, Any] = {}
+            for label, loops in (('quiet', 0), (f'busy{busy}', busy)):
+                with busy_loops(loops):
+                    realtime_args = ('--realtime', '--duration', '30')
+                    code, bag, _ = _run_with_kills(path, realtime_args, (), env, tmp)
+                    base = _tracking_errors(bag) if bag.exists() else (np.nan, np.nan)
+                    tries_out = []
+                    for _ in range(tries):
+                        code, bag, log = _run_with_kills(path, realtime_args, (10.0, 17.0),
+                                                         env, tmp)
+                        errors = _tracking_errors(bag) if bag.exists() else (np.nan, np.nan)
+                        tries_out.append({
+                            'exit_code': code, 'position_m': errors[0],
+                            'attitude_deg': float(np.degrees(errors[1])),
+                            'within_bound': bool(errors[0] <= base[0] + 0.05 and np.degrees(
+                                errors[1]) <= np.degrees(base[1]) + 3.0),
+                            'takeovers': log.count('ready again')})
+                    rows[label] = {'without_kills': {'position_m': base[0],
+                                                     'attitude_deg': float(np.degrees(base[1]))},
+                                   'with_kills': tries_out}
+            lock = []
+            for _ in range(lockstep_kills):
+                kill_at = sorted(float(t) for t in rng.uniform(5.0, 100.0, 2))
+                code, bag, log = _run_with_kills(path, ('--duration', '120'), kill_at, env, tmp)
+                lock.append({
+                    'kill_at': kill_at, 'exit_code': code,
+                    'max_difference': (_same_run(bag, 'current_hold', 'pid', 120.0)
+                                       if code == 0 else float('nan')),
+                    'missing': missing_stamps(bag, 120 * 10**9, 10**7, 5 * 10**7)
+                    if bag.exists() else {'(no bag)': 1}})
+            rows['lockstep'] = lock
+            out[path] = rows
+    return out
+
+
 SECTIONS: dict[str, Callable[[argparse.Namespace], dict[str, Any]]] = {
     'short': lambda a: short(a.short_tries),
     'recorded': lambda a: recorded(a.recorded_runs, a.busy),
     'realtime': lambda a: realtime(a.busy),
+    'restarts': lambda a: restarts(a.restart_tries, a.lockstep_kills, a.busy),
 }
 
 
@@ -157,6 +315,8 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     parser.add_argument('--busy', type=int, default=2, help='busy loops beside the loaded runs')
     parser.add_argument('--short-tries', type=int, default=20)
     parser.add_argument('--recorded-runs', type=int, default=5)
+    parser.add_argument('--restart-tries', type=int, default=5)
+    parser.add_argument('--lockstep-kills', type=int, default=10)
     parser.add_argument('--out', type=Path, default=Path('runs/stress/stress.json'))
     args = parser.parse_args(argv)
     results: dict[str, Any] = {}

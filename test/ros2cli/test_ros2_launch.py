@@ -3,13 +3,16 @@ lists them, a recorded lockstep run giving the headless numbers, Ctrl-C."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 import re
+import signal
 from typing import Any
 
+import numpy as np
 import pytest
 from ros2_cli import Ros2, ctrl_c, doc_commands, wait_nodes
-from ros_stack import assert_same_run
+from ros_stack import SimTime, assert_same_run
 
 from tiltrov_ros.core.runner import run_scenario, stack_config
 
@@ -63,3 +66,39 @@ def test_ctrl_c_ends_a_launch_cleanly(ros: Any, ros2: Ros2, tmp_path: Path) -> N
     assert 'Traceback' not in output and 'KeyboardInterrupt' not in output, output
     for node in NODES:
         assert re.search(rf'\[{node}-\d+\]: process has finished cleanly', output), output
+
+
+@pytest.mark.slow
+def test_respawned_nodes_are_taken_over_bit_for_bit(ros: Any, ros2: Ros2,
+                                                     tmp_path: Path) -> None:
+    """``respawn:=wrench_controller,thrust_allocator`` in a recorded 120 s lockstep pid run:
+    both killed (SIGKILL) at seeded random moments; each one's standby takes over, the
+    launch goes on (a respawned node's exit does not end it), ends with exit code 0, and
+    the bag is the headless run without kills to the last bit, every step and tick in it."""
+    from tiltrov_ros.bag.losses import missing_stamps
+    from tiltrov_ros.bag.reader import read_runlog
+
+    kill_at = sorted(float(t) for t in np.random.default_rng(7).uniform(5.0, 100.0, 2))
+    log = tmp_path / 'launch.log'
+    proc = ros2.start(['ros2', *LAUNCH, 'scenario:=current_hold', 'controller:=pid',
+                       'duration:=120', 'record:=bag',
+                       'respawn:=wrench_controller,thrust_allocator'], tmp_path, log)
+    sim = SimTime(ros.node('sim_time_probe'))
+    try:
+        for victim, at in zip(('wrench_controller', 'thrust_allocator'), kill_at):
+            assert ros.spin_until(lambda at=at: sim.reached(at), timeout=120.0), log.read_text()
+            # The first process of the executable is the node (its standby starts after).
+            pid = int(re.search(rf'\[{victim}-\d+\]: process started with pid \[(\d+)\]',
+                                log.read_text())[1])
+            os.kill(pid, signal.SIGKILL)
+        assert proc.wait(timeout=240) == 0, log.read_text()[-5000:]
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    output = log.read_text()
+    assert output.count('every node of the run is ready again') == 2, output[-5000:]
+    assert 'not bumpless' not in output and 'starts from zero' not in output
+    bag = tmp_path / 'bag'
+    assert missing_stamps(bag, 120 * 10**9, 10**7, 5 * 10**7) == {}
+    assert_same_run(read_runlog(bag), run_scenario(stack_config('current_hold', 'pid'),
+                                                   duration=120.0), atol=0.0)
