@@ -1,0 +1,61 @@
+"""The real ``ros2`` command line against a busy stack: during a recorded lockstep run at
+full speed (every process busy, the recorder pacing the plant), ``ros2 node list`` shows
+every node, the recorder included, and ``ros2 param get`` and ``ros2 param set`` on each
+answer with the command line's own defaults (its daemon, its timeouts), each once: no
+retry. (The nodes announce themselves every 0.1 s, config/fastdds.xml: a command line
+started later finds them within its window.)"""
+
+from __future__ import annotations
+
+from pathlib import Path
+import subprocess
+from typing import Any
+
+import pytest
+from ros2_cli import Ros2, ctrl_c, wait_nodes, without_dds_log
+import yaml
+
+NODES = ('plant_simulator', 'wrench_controller', 'thrust_allocator', 'reference_publisher',
+         'bag_recorder')
+#: A parameter each node lets change at run time, and the value it has (set to itself).
+SETTABLE = {'plant_simulator': ('stall_timeout', '1.0'),
+            'wrench_controller': ('input_timeout', '1.0'),
+            'thrust_allocator': ('input_timeout', '1.0'),
+            'reference_publisher': ('max_catch_up', '100')}
+
+
+def _plain(ros2: Ros2, *args: str) -> subprocess.CompletedProcess[str]:
+    """``ros2 args...`` exactly as typed: the command line's defaults, one attempt."""
+    return without_dds_log(subprocess.run([ros2.exe, *args], cwd=ros2.workspace.root,
+                                          env=ros2.env, capture_output=True, text=True,
+                                          timeout=120))
+
+
+@pytest.mark.slow
+def test_node_list_param_get_and_set_answer_on_a_busy_recorded_run(
+        ros: Any, ros2: Ros2, tmp_path: Path) -> None:
+    proc = ros2.start(['ros2', 'launch', 'tiltrov_ros', 'tiltrov.launch.py',
+                       'duration:=3600', 'record:=bag'], tmp_path, tmp_path / 'launch.log')
+    try:
+        wait_nodes(ros, {f'/{n}' for n in NODES}, [proc])
+        started = _plain(ros2, 'daemon', 'start')
+        assert started.returncode == 0, started
+        listed = _plain(ros2, 'node', 'list')
+        assert listed.returncode == 0, listed.stdout + listed.stderr
+        assert {f'/{n}' for n in NODES} <= set(listed.stdout.split()), listed.stdout
+        for node in NODES:
+            got = _plain(ros2, 'param', 'get', f'/{node}', 'use_sim_time')
+            assert got.returncode == 0 and 'Boolean value is:' in got.stdout, (node, got)
+        got = _plain(ros2, 'param', 'get', '/bag_recorder', 'run_info')
+        assert got.returncode == 0, got
+        run_info = got.stdout.split('String value is: ', 1)[1].strip()
+        quoted = yaml.safe_dump(run_info, width=1 << 20).splitlines()[0]   # a string, not YAML
+        sets = {**SETTABLE, 'bag_recorder': ('run_info', quoted)}
+        for node, (name, value) in sets.items():
+            done = _plain(ros2, 'param', 'set', f'/{node}', name, value)
+            assert done.stdout.strip() == 'Set parameter successful', (node, done)
+        assert proc.poll() is None, (tmp_path / 'launch.log').read_text()[-3000:]
+    finally:
+        _plain(ros2, 'daemon', 'stop')
+        if proc.poll() is None:
+            ctrl_c(proc, timeout=60)
