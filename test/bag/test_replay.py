@@ -161,7 +161,7 @@ def test_topics_remap_recorded_clock_and_loop(ros: Any, tmp_path: Path) -> None:
         ros, tmp_path / 'bag', options,
         should_stop=lambda p: p.counts.get('/replayed/odom', 0) >= 2 * 49,
         until=lambda: listener.count('/replayed/odom') >= 2 * 49)
-    ros.spin_for(0.2)
+    assert ros.spin_until(lambda: listener.count('/clock') >= 98)
     odom = [d for _, d in recorded['/odom']]
     assert [d for _, d in listener.got['/replayed/odom']][:98] == odom + odom  # looped
     assert listener.count('/odom') == listener.count('/wrench_cmd') == 0
@@ -179,7 +179,8 @@ def test_generated_clock_for_a_bag_without_one(ros: Any, tmp_path: Path) -> None
     ticks = list(range(START, last + 1, 20_000_000))  # every 20 ms of log time
     run_player(ros, tmp_path / 'bag', options, should_stop=lambda p: False,
                until=lambda: listener.count('/odom') == 49)
-    ros.spin_for(0.2)
+    assert ros.spin_until(lambda: listener.count('/clock') >= len(ticks))
+    ros.spin_for(0.2)       # and no more than these
     assert [cdr_stamp_ns(d) for _, d in listener.got['/clock']] == ticks
 
 

@@ -188,7 +188,8 @@ def test_realtime_uses_the_latest_setpoint_and_zero_wrench_without_one(rig) -> N
     assert node.no_setpoint == 1
     send('velocity', 0)
     send('setpoint', 0)
-    ros.spin_for(0.1)
+    assert ros.spin_until(lambda: node._latest_setpoint is not None
+                          and node._latest_velocity is not None)
     send('odom', 3 * TICK)           # the latest setpoint (stamped 0) is used
     assert ros.spin_until(lambda: len(probe['wrench_cmd']) == 2)
     _, expected = _expected('pd', t=0.15)

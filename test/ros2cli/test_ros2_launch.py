@@ -55,16 +55,21 @@ def test_a_recorded_lockstep_launch_gives_the_headless_numbers(ros2: Ros2,
 
 @pytest.mark.slow
 def test_ctrl_c_ends_a_launch_cleanly(ros: Any, ros2: Ros2, tmp_path: Path) -> None:
-    """Ctrl-C in the terminal of a realtime launch in a namespace (SIGINT to every
+    """Ctrl-C in the terminal of a recorded realtime launch in a namespace (SIGINT to every
     process, and launch's own SIGINT to the nodes): exit code 0, no traceback, every
-    node clean."""
+    node clean, the bag closed, readable and whole (the recorder stops once it has every
+    node's final report)."""
+    from tiltrov_ros.bag.losses import losses
+
     log = tmp_path / 'launch.log'
-    proc = ros2.start(['ros2', *LAUNCH, 'mode:=realtime', 'namespace:=rov1'], tmp_path, log)
-    wait_nodes(ros, {f'/rov1/{n}' for n in NODES}, [proc])
+    proc = ros2.start(['ros2', *LAUNCH, 'mode:=realtime', 'namespace:=rov1', 'record:=bag'],
+                      tmp_path, log)
+    wait_nodes(ros, {f'/rov1/{n}' for n in (*NODES, 'bag_recorder')}, [proc])
     assert ctrl_c(proc, timeout=60) == 0, log.read_text()
+    assert not losses(tmp_path / 'bag'), losses(tmp_path / 'bag').lines()
     output = log.read_text()
     assert 'Traceback' not in output and 'KeyboardInterrupt' not in output, output
-    for node in NODES:
+    for node in (*NODES, 'bag_recorder'):
         assert re.search(rf'\[{node}-\d+\]: process has finished cleanly', output), output
 
 

@@ -74,10 +74,15 @@ def test_a_node_dying_mid_run_stops_the_others(ros: Any, tmp_path: Path) -> None
 
 @pytest.mark.slow
 def test_ctrl_c_stops_every_node_cleanly(ros: Any, tmp_path: Path) -> None:
-    launch = _Launch(tmp_path, '--realtime', '--duration', '600')
+    """Ctrl-C of a recorded realtime launch: every node stops cleanly, the recorder once it
+    has every node's final report, and the bag is closed, readable and loses nothing."""
+    from tiltrov_ros.bag.losses import losses
+
+    bag = tmp_path / 'bag'
+    launch = _Launch(tmp_path, '--realtime', '--duration', '600', '--record', str(bag))
     try:
         pids = launch.wait_running()
-        _ready(ros, NODES)
+        _ready(ros, (*NODES, 'bag_recorder'))
         launch.process.send_signal(signal.SIGINT)
         assert launch.finish(timeout=60) == 130, launch.output
         out = launch.output
@@ -86,6 +91,7 @@ def test_ctrl_c_stops_every_node_cleanly(ros: Any, tmp_path: Path) -> None:
         assert not any(_alive(pid) for pid in pids.values())
     finally:
         launch.cleanup()
+    assert not losses(bag), losses(bag).lines()
 
 
 @pytest.mark.slow
