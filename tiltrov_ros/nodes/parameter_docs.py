@@ -30,14 +30,14 @@ from tiltrov_ros.core.params import ROBOT, STACK
 from tiltrov_ros.core.paramtable import ParamTable
 from tiltrov_ros.core.validation import FAILED_THRUSTERS
 
+from .allocator_params import ALLOCATOR_PARAMS
 from .base import RUN
+from .controller_params import CONTROLLER_PARAMS
 from .guard import STAMP_BOUNDS
 from .parameters import robot_defaults
 from .plant_config import PLANT_PARAMS
 from .recorder_config import RECORDER_PARAMS
 from .reference_publisher import REFERENCE_PARAMS
-from .thrust_allocator import ALLOCATOR_PARAMS
-from .wrench_controller import CONTROLLER_PARAMS
 
 
 @dataclass(frozen=True)

@@ -23,30 +23,20 @@ from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Sequence
-from dataclasses import asdict, replace
 import math
 import sys
 from typing import Any
 
 from geometry_msgs.msg import WrenchStamped
 import numpy as np
-from rcl_interfaces.msg import SetParametersResult
-from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
 from tiltrov_ros.core.allocation import (
-    ALLOCATION,
-    SHORTFALL_FRACTION,
     AllocationResult,
-    AllocatorConfig,
     from_tilts,
-    load_allocator_config,
-    shortfall_tolerances,
 )
-from tiltrov_ros.core.errors import ParameterError
 from tiltrov_ros.core.names import (
     ALLOCATOR,
-    FAILSAFE_FRAME,
     FRAME_BODY,
     JOINT_STATES,
     THRUST_CMD,
@@ -59,19 +49,16 @@ from tiltrov_ros.core.names import (
     WRENCH_CMD,
     WRENCH_DOFS,
 )
-from tiltrov_ros.core.paramtable import Param, ParamTable
-from tiltrov_ros.core.scenarios import ThrusterFault, failed_at, load_scenario
-from tiltrov_ros.core.steady import HoldMonitor
-from tiltrov_ros.core.timebase import format_ns, seconds, to_ns
+from tiltrov_ros.core.timebase import format_ns, seconds
 from tiltrov_ros.core.validation import (
     MAX_WRENCH,
-    InvalidInput,
     check_finite,
     clip_wrench,
-    failed_thruster_indices,
     limit_command,
 )
 
+from .allocator_params import AllocatorParameters
+from .allocator_safety import AllocatorSafety, thruster_names
 from .base import OK, WARN, TiltrovNode
 from .conversions import (
     FloatArray,
@@ -86,55 +73,18 @@ from .conversions import (
     wrench_template,
 )
 from .executors import main_loop
-from .guard import THROTTLE, guarded, input_callback
+from .guard import THROTTLE, input_callback
 from .handoff import HANDOFF_QOS, Handoff, tilt_target_message
-from .parameters import Overrides, check, declare, declare_failed_thrusters, declare_robot
+from .parameters import Overrides
 from .qos import PUBLISHER_QOS, RELIABLE_QOS
-from .tilt_request import TILT_REQUEST_MODES, TiltRequests, keep_bounded
+from .tilt_request import TiltRequests, keep_bounded
 from .watchdog import InputWatchdog
 
-#: Where an allocation starts from: the last commanded tilts, or the measured ones.
-TILT_SOURCES = ('commanded', 'measured')
 #: s (wall): how often a wrench waiting for its tilt request is looked at.
 WATCHDOG_PERIOD = 0.1
 
-#: The node's own parameters (besides the allocator's, failed_thrusters, the stamp
-#: bounds and the robot).
-ALLOCATOR_PARAMS = ParamTable('thrust_allocator', [
-    Param('tilt_request', 'str', 'auto', 'tilts fixed by the controller (switching baseline): '
-          'required, ignored, or auto (paired once a request carries a wrench_cmd stamp, free '
-          'again after a wrench waited input_timeout in vain)', choices=TILT_REQUEST_MODES,
-          read_only=True),
-    Param('input_timeout', 'float', 1.0, 'wall seconds a wrench waits for its tilt_request '
-          'before the latest one is used (in a lockstep run: before the wait is reported; '
-          'it waits on)', 's', low=0.001, high=3600.0),
-    Param('wrench_timeout', 'float', 0.5, 'zero thrust (tilts held) is published every '
-          'control period while the newest valid wrench_cmd is older than this; on sim time '
-          'measured on /clock, else wall time since the message arrived; 0: off', 's',
-          low=0.0, high=3600.0),
-    Param('respawn_hold', 'float', 0.0, 'with a respawn configured (the launchers set it): a '
-          'wrench_cmd older than wrench_timeout is held, not answered with zero thrust, '
-          'until it is this old (a respawned controller takes over meanwhile); 0: zero '
-          'thrust at wrench_timeout', 's', low=0.0, high=60.0, read_only=True),
-    Param('tilt_source', 'str', 'commanded', 'tilts each allocation starts from (and moves '
-          'at most max_tilt_step away from): commanded, the last answer; measured, the '
-          'servos\' positions in joint_states (the one stamped with the wrench, else the '
-          'latest before it)', choices=TILT_SOURCES, read_only=True),
-    Param('wrench_tolerance', 'float', SHORTFALL_FRACTION, 'a wrench component missing by '
-          'more than this fraction of max_thrust (forces; moments: times min(length, width) / '
-          '2) counts as not achieved: logged, counted per component, WARN on /diagnostics',
-          '-', low=0.0, high=1.0),
-    Param('scenario', 'str', '', 'scenario name or path whose faults (thruster failures) the '
-          'allocator is told of at their time + detected_after, by the wrench stamps; empty: '
-          'none', read_only=True),
-])
 
-
-def thruster_names(indices: Sequence[int]) -> str:
-    return ', '.join(THRUSTERS[i] for i in indices) or 'none'
-
-
-class ThrustAllocatorNode(TiltRequests, TiltrovNode):
+class ThrustAllocatorNode(AllocatorParameters, AllocatorSafety, TiltRequests, TiltrovNode):
     """The thrust allocator (see the module docstring)."""
 
     kernel_groups = ('allocation',)
@@ -221,98 +171,11 @@ class ThrustAllocatorNode(TiltRequests, TiltrovNode):
 
     # -- parameters ------------------------------------------------------------------
 
-    def _declare_parameters(self) -> None:
-        shipped = load_allocator_config()
-        declare(self, ALLOCATION, defaults=asdict(shipped))
-        own = declare(self, ALLOCATOR_PARAMS, only=('tilt_request', 'input_timeout',
-                                                  'wrench_timeout', 'respawn_hold',
-                                                  'wrench_tolerance',
-                                                  'tilt_source'))
-        self.failed_param = declare_failed_thrusters(self)
-        own.update(declare(self, ALLOCATOR_PARAMS, only=('scenario',)))
-        self.scenario_faults: tuple[ThrusterFault, ...] = (
-            load_scenario(own['scenario']).faults if own['scenario'] else ())
-        self.declare_stamp_bounds()
-        self.robot, self.control_period = declare_robot(self)
-        self.check_overrides()
-        own = check(ALLOCATOR_PARAMS, own)
-        self.tilt_request_mode = own['tilt_request']
-        self.input_timeout = own['input_timeout']
-        self.wrench_timeout = own['wrench_timeout']
-        self.respawn_hold = own['respawn_hold']
-        self.wrench_tolerance = own['wrench_tolerance']
-        self.tolerances = shortfall_tolerances(self.robot, self.wrench_tolerance)
-        self.measured_tilts = own['tilt_source'] == 'measured'
-        self.allocator_config = AllocatorConfig.from_mapping(
-            {key: self.get_parameter(key).value for key in ALLOCATION.names})
-
-    def _validate_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
-        verdict = self.check_failed_thrusters(parameters)
-        if not verdict.successful:
-            return verdict
-        changes = {p.name: p.value for p in parameters if p.name in ALLOCATION.names}
-        if not changes:
-            return SetParametersResult(successful=True)
-        values = {key: changes.get(key, self.get_parameter(key).value)
-                  for key in ALLOCATION.names}
-        try:
-            AllocatorConfig.from_mapping(values)
-        except ParameterError as exc:
-            return self.reject(str(exc))
-        return SetParametersResult(successful=True)
-
-    def _apply_parameters(self, parameters: list[Parameter]) -> None:
-        for p in parameters:
-            if p.name == 'wrench_timeout':
-                self.wrench_timeout = float(p.value)
-            elif p.name == 'wrench_tolerance':
-                self.wrench_tolerance = float(p.value)
-                self.tolerances = shortfall_tolerances(self.robot, self.wrench_tolerance)
-                self._new_hold_monitor()
-            elif p.name == 'input_timeout':
-                self.input_timeout = float(p.value)
-            elif p.name == 'failed_thrusters':
-                self.failed_param = failed_thruster_indices(p.value)
-                self._use_failed(self._wanted_failed(self._last_ns if self._last_ns >= 0
-                                                     else None), 'failed_thrusters set')
-        if not any(p.name in ALLOCATION.names for p in parameters):
-            return
-        self.allocator_config = AllocatorConfig.from_mapping(
-            {key: self.get_parameter(key).value for key in ALLOCATION.names})
-        self.allocator = self.allocator_config.build(self.robot, self.control_period,
-                                                     self.failed)
-        self._new_hold_monitor()
-        self.get_logger().info(f'allocator changed: {self.allocator_config}')
-
     def on_handshake(self) -> None:
         if self.handshake.ready:
             self.decide_tilt_requests()
 
-    def _new_hold_monitor(self) -> None:
-        self.hold_monitor = HoldMonitor(self.robot, self.control_period,
-                                        self.allocator_config.weights, self.wrench_tolerance)
-
     # -- failed thrusters ------------------------------------------------------------
-
-    def _wanted_failed(self, ns: int | None) -> tuple[int, ...]:
-        """``failed_thrusters`` plus the scenario's faults detected by stamp ``ns``."""
-        scheduled = (failed_at(self.scenario_faults, seconds(ns), detected=True)
-                     if ns is not None and self.scenario_faults else ())
-        return tuple(sorted(set(self.failed_param) | set(scheduled)))
-
-    def _use_failed(self, failed: tuple[int, ...], why: str) -> None:
-        """Allocate with the thrusters not in ``failed`` (the core's robust allocator
-        with ``failed_thrusters``: least weighted error, depth and attitude first)."""
-        if failed == self.failed:
-            return
-        self.failed = failed
-        self.allocator = self.allocator_config.build(self.robot, self.control_period, failed)
-        self.hold_monitor.reset()
-        working = [i for i in range(4) if i not in failed]
-        self.get_logger().warning(
-            f'{why}: failed thruster(s): {thruster_names(failed)}; allocating with '
-            f'{thruster_names(working)} (weights {[float(w) for w in self.allocator.weights]}: '
-            'depth and attitude first)')
 
     # -- inputs ----------------------------------------------------------------------
 
@@ -372,31 +235,6 @@ class ThrustAllocatorNode(TiltRequests, TiltrovNode):
 
     # -- allocation ------------------------------------------------------------------
 
-    def _resume(self, ns: int) -> None:
-        """The first wrench of a respawned allocator: start from its predecessor's last
-        answer before ``ns`` (its commanded tilts, and the travel under way then)."""
-        handoff, self.handoff = self.handoff, None
-        if handoff is None:
-            return
-        got = handoff.before(TILT_CMD, ns, JointState)
-        if got is None:
-            self.get_logger().warning(f'no tilt_cmd of a predecessor before {format_ns(ns)}: '
-                                      'allocating afresh')
-            return
-        stamp, cmd = got
-        target = handoff.before(TILT_TARGET, stamp + 1, JointState)
-        travel = (tuple(target[1].position) if target is not None and target[0] == stamp
-                  and list(target[1].name) == list(TILTS) else None)
-        self.previous = replace(from_tilts(None, joint_state_values(cmd, TILTS, 'position')),
-                                method='transit' if travel else 'previous',
-                                target=travel)      # type: ignore[arg-type]
-        self.resumed_from = stamp
-        self.get_logger().info(
-            f'resumed from its predecessor\'s answer at {format_ns(stamp)}'
-            + (f', travelling to {travel}' if travel else '')
-            + ('' if stamp == ns - to_ns(self.control_period)
-               else f' (not the tick before {format_ns(ns)}: not bumpless)'))
-
     def _allocate(self, ns: int, wrench: FloatArray, request: tuple[float, float] | None) -> None:
         self._waiting = None
         if self.handoff is not None:
@@ -454,28 +292,6 @@ class ThrustAllocatorNode(TiltRequests, TiltrovNode):
         self._last_msgs = msgs
         self._publish(*msgs)
 
-    def held_tilts(self) -> tuple[float, float]:
-        """The tilts of the last allocation (in range), else 0: what a safe answer holds."""
-        prev = self.previous
-        if prev is None or not (math.isfinite(prev.tilt_front)
-                                and math.isfinite(prev.tilt_rear)):
-            return (0.0, 0.0)
-        lo, hi = self.robot.tilt_min, self.robot.tilt_max
-        return (min(max(prev.tilt_front, lo), hi), min(max(prev.tilt_rear, lo), hi))
-
-    def _safe_msgs(self, ns: int) -> tuple[WrenchStamped, JointState, JointState]:
-        """The safe answer stamped ``ns``: zero thrust (so zero wrench), tilts held."""
-        return (fill_wrench(new_wrench(), ns, (0.0,) * 6),
-                fill_joint_state(new_joint_state(TILTS), ns, position=self.held_tilts()),
-                fill_joint_state(new_joint_state(THRUSTERS), ns, effort=(0.0,) * 4))
-
-    def _answer_safe(self, ns: int) -> None:
-        self.safe_answers += 1
-        self._waiting = None
-        self._last_ns = ns
-        self._last_msgs = self._safe_msgs(ns)
-        self._publish(*self._last_msgs)
-
     def _publish(self, achieved: WrenchStamped, tilt: JointState, thrust: JointState) -> None:
         self._achieved_pub.publish(achieved)
         self._tilt_pub.publish(tilt)
@@ -520,38 +336,6 @@ class ThrustAllocatorNode(TiltRequests, TiltrovNode):
                         if dof in missed), throttle_duration_sec=THROTTLE)
 
     # -- watchdog --------------------------------------------------------------------
-
-    @guarded
-    def _wrench_watchdog(self) -> None:
-        """Zero thrust, tilts held, while wrench_cmd is stale (not cached)."""
-        timeout = self.wrench_timeout
-        if timeout > 0 and self.respawn_hold > 0:
-            timeout = max(timeout, self.respawn_hold)     # a respawned controller may come
-        seen = self.wrench_watchdog.expired(timeout)
-        if seen is None:
-            return
-        self.watchdog_outputs += 1
-        _, tilt, thrust = self._safe_msgs(
-            self.estimated_now_ns(*seen, to_ns(self.control_period)))
-        # It answers no wrench_cmd: marked (its stamp, off the tick grid, may still meet
-        # the controller's own safety wrench), and no wrench_achieved goes with it.
-        tilt.header.frame_id = thrust.header.frame_id = FAILSAFE_FRAME
-        self._tilt_pub.publish(tilt)
-        self._thrust_pub.publish(thrust)
-
-    def on_rejected(self, topic: str, bad: InvalidInput, stamp: int | None) -> None:
-        """A rejected wrench with a valid stamp, later than the last answered and not
-        waiting, gets the safe answer (the plant waits for that stamp in lockstep),
-        stamped no later than the node's clock (:meth:`safe_stamp`) and not kept as the
-        answer of that stamp; nothing else changes. A bad stamp gets none."""
-        waiting = self._waiting
-        if (topic != WRENCH_CMD or stamp is None or stamp <= self._last_ns
-                or (waiting is not None and waiting.ns == stamp)):
-            return
-        seen = self.wrench_watchdog.seen
-        self.safe_answers += 1
-        self._publish(*self._safe_msgs(self.safe_stamp(
-            stamp, seen[0] if seen else None, to_ns(self.control_period))))
 
     # -- diagnostics -----------------------------------------------------------------
 

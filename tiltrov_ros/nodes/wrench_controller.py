@@ -27,43 +27,28 @@ controller.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 import sys
 from typing import Any
 
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
 from nav_msgs.msg import Odometry
 import numpy as np
-from rcl_interfaces.msg import SetParametersResult
-from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
 from tiltrov_ros.core.controllers import (
-    CONTROL_LAW,
-    GAINS,
-    SWITCHING,
-    ControllerConfig,
     ControlOutput,
     PIDController,
     Reference,
-    load_controller_config,
     make_controller,
-    retune,
 )
-from tiltrov_ros.core.errors import ParameterError
-from tiltrov_ros.core.frames import CONVENTIONS, enu_to_ned
+from tiltrov_ros.core.frames import enu_to_ned
 from tiltrov_ros.core.names import (
     CONTROLLER,
-    FRAME_BODY,
-    FRAME_BODY_FLU,
     FRAME_EARTH,
-    FRAME_EARTH_ENU,
     LOCKSTEP,
-    MODES,
     ODOM,
     PID_INTEGRAL,
-    PLANT,
-    REALTIME,
     SETPOINT,
     SETPOINT_VELOCITY,
     TILT_REQUEST,
@@ -71,7 +56,6 @@ from tiltrov_ros.core.names import (
     WRENCH_ACHIEVED,
     WRENCH_CMD,
 )
-from tiltrov_ros.core.paramtable import Param, ParamTable
 from tiltrov_ros.core.timebase import cdr_stamp_ns, format_ns, seconds, to_ns
 from tiltrov_ros.core.validation import (
     InvalidInput,
@@ -82,6 +66,8 @@ from tiltrov_ros.core.validation import (
 
 from .achieved_input import AchievedInput
 from .base import OK, WARN, TiltrovNode
+from .controller_params import ControllerParameters
+from .controller_waits import ControllerWaits
 from .conversions import (
     FloatArray,
     fill_joint_state,
@@ -93,14 +79,12 @@ from .conversions import (
     pose_arrays,
     stamp_ns,
     twist_array,
-    wrench_array,
     wrench_template,
 )
 from .executors import main_loop
 from .guard import THROTTLE, guarded, input_callback
 from .handoff import HANDOFF_QOS, Handoff, pid_integral_message
-from .handshake import END_KEY
-from .parameters import Overrides, check, declare, declare_robot
+from .parameters import Overrides
 from .qos import PUBLISHER_QOS, RELIABLE_QOS, reader_qos
 from .watchdog import InputWatchdog
 
@@ -108,26 +92,6 @@ from .watchdog import InputWatchdog
 WATCHDOG_PERIOD = 0.1
 #: Buffered setpoints (by stamp); older ones are dropped.
 BUFFER = 200
-#: The controller node's own parameters (besides the controller's: controller, gains.*,
-#: switching.*; and the stamp bounds and the robot).
-CONTROLLER_PARAMS = ParamTable('wrench_controller', [
-    Param('mode', 'str', REALTIME, 'lockstep: wait for the setpoint stamped with each tick '
-          '(deterministic); realtime: use the latest setpoint', choices=MODES, read_only=True),
-    Param('use_setpoint_velocity', 'bool', True, 'use setpoint_velocity as the feed-forward '
-          'd(eta_d)/dt (false: zero)', read_only=True),
-    Param('input_timeout', 'float', 1.0, 'lockstep: wall seconds a tick waits for an input '
-          'before the wait is reported (log, /diagnostics); it changes nothing else', 's',
-          low=0.001, high=3600.0),
-    Param('odom_frame_convention', 'str', 'ned', "odom in NED/FRD (odom_ned, base_link_frd: "
-          "the plant's) or ENU/FLU (odom, base_link: REP-103/105, e.g. robot_localization), "
-          'converted to NED/FRD on arrival', choices=CONVENTIONS, read_only=True),
-    Param('odom_timeout', 'float', 0.5, 'realtime: a zero wrench is published (every control '
-          'period) while the newest valid odom is older than this; on sim time measured on '
-          '/clock, else wall time since the message arrived; 0: off', 's', low=0.0,
-          high=3600.0),
-])
-
-
 @dataclass
 class _Tick:
     """An odom at a control tick, waiting for its setpoint."""
@@ -139,17 +103,7 @@ class _Tick:
     since: int          # steady ns when it arrived
 
 
-def _config_mapping(get: Any) -> dict[str, Any]:
-    """The ``wrench_controller`` parameters as ControllerConfig.from_mapping wants them."""
-    return {
-        'controller': get('controller'),
-        'gains': {key: value if isinstance(value, float) else list(value)  # arrays: lists
-                  for key in GAINS.names for value in [get(GAINS.full_name(key))]},
-        'switching': {key: get(SWITCHING.full_name(key)) for key in SWITCHING.names},
-    }
-
-
-class WrenchController(AchievedInput, TiltrovNode):
+class WrenchController(ControllerParameters, ControllerWaits, AchievedInput, TiltrovNode):
     """The wrench controller (see the module docstring). ``handoff``: what a standby
     kept of the predecessor of this node (nodes/handoff.py): the pid resumes from it."""
 
@@ -239,56 +193,6 @@ class WrenchController(AchievedInput, TiltrovNode):
 
     # -- parameters ------------------------------------------------------------------
 
-    def _declare_parameters(self) -> None:
-        shipped = load_controller_config()
-        declare(self, CONTROL_LAW, defaults={'controller': shipped.kind})
-        own = declare(self, CONTROLLER_PARAMS)
-        self.declare_stamp_bounds()
-        declare(self, GAINS, defaults=asdict(shipped.gains))
-        declare(self, SWITCHING, defaults=asdict(shipped.switching))
-        self.robot, self.control_period = declare_robot(self)
-        self.check_overrides()
-        own = check(CONTROLLER_PARAMS, own)
-        self.mode = own['mode']
-        self.use_velocity = own['use_setpoint_velocity']
-        self.input_timeout = own['input_timeout']
-        self.odom_timeout = own['odom_timeout']
-        self.enu = own['odom_frame_convention'] == 'enu'
-        self.odom_frames = ((FRAME_EARTH_ENU, FRAME_BODY_FLU) if self.enu
-                            else (FRAME_EARTH, FRAME_BODY))
-        self.controller_config = ControllerConfig.from_mapping(
-            _config_mapping(lambda name: self.get_parameter(name).value))
-
-    def _validate_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
-        """Check gains.* and switching.* changes with the core's validation."""
-        changes = {p.name: p.value for p in parameters
-                   if p.name.startswith(('gains.', 'switching.'))}
-        if not changes:
-            return SetParametersResult(successful=True)
-
-        def get(name: str) -> Any:
-            return changes[name] if name in changes else self.get_parameter(name).value
-
-        try:
-            ControllerConfig.from_mapping(_config_mapping(get))
-        except ParameterError as exc:
-            return self.reject(str(exc))
-        return SetParametersResult(successful=True)
-
-    def _apply_parameters(self, parameters: list[Parameter]) -> None:
-        for p in parameters:
-            if p.name == 'odom_timeout':
-                self.odom_timeout = float(p.value)
-            elif p.name == 'input_timeout':
-                self.input_timeout = float(p.value)
-        if not any(p.name.startswith(('gains.', 'switching.')) for p in parameters):
-            return
-        self.controller_config = ControllerConfig.from_mapping(
-            _config_mapping(lambda name: self.get_parameter(name).value))
-        self.controller = retune(self.controller, self.controller_config, self.robot)
-        self.get_logger().info('gains changed: ' + ', '.join(
-            f'{p.name} = {p.value!s}' for p in parameters))
-
     # -- inputs ----------------------------------------------------------------------
 
     @guarded
@@ -354,45 +258,6 @@ class WrenchController(AchievedInput, TiltrovNode):
 
     # -- the tick --------------------------------------------------------------------
 
-    def _decide_inputs(self) -> frozenset[str]:
-        """lockstep: the inputs besides the setpoint that a tick waits for, decided once:
-        at the run's handshake, those a node of the run publishes; alone, at the first tick,
-        those with a publisher now. Said once in the log."""
-        if self._waits_for is not None:
-            return self._waits_for
-        wanted = [t for t, used in ((SETPOINT_VELOCITY, self.use_velocity),
-                                    (WRENCH_ACHIEVED, self.kind == 'pid')) if used]
-        hs = self.handshake
-        if hs.active:
-            published = {t for state in hs.states.values() for t, _ in state.publishes}
-            waits = frozenset(t for t in wanted if self.resolve_topic_name(t) in published)
-        else:
-            waits = frozenset(t for t in wanted
-                              if self.count_publishers(self.resolve_topic_name(t)) > 0)
-        self._waits_for = waits
-        for topic in wanted:
-            if topic in waits:
-                self.get_logger().info(f'each tick waits for its {topic}' + (
-                    ' (while the anti-windup is on)' if topic == WRENCH_ACHIEVED else ''))
-            else:
-                what = ('zero feed-forward' if topic == SETPOINT_VELOCITY
-                        else 'no anti-windup')
-                self.get_logger().warning(f'no node publishes {topic}: {what} for the '
-                                          'whole run')
-        return waits
-
-    @property
-    def run_end_ns(self) -> int | None:
-        """The sim time the run ends at, as the plant of the run says (None: unknown)."""
-        plant = self.handshake.state_of(PLANT)
-        end = plant.extra.get(END_KEY) if plant is not None else None
-        return int(end) if end is not None and end.isdigit() else None
-
-    def on_handshake(self) -> None:
-        """The run's handshake is this node's moment to decide what a tick waits for."""
-        if self.lockstep and self._waits_for is None and self.handshake.ready:
-            self._decide_inputs()
-
     def _try_compute(self) -> None:
         tick = self._tick
         if tick is None:
@@ -433,27 +298,6 @@ class WrenchController(AchievedInput, TiltrovNode):
         for buffer in (self._setpoints, self._velocities):
             for stamp in [s for s in buffer if s < ns]:
                 del buffer[stamp]
-
-    def _resume(self, ns: int) -> None:
-        """The first tick of a respawned controller: the pid continues from the state its
-        predecessor had after the tick before ``ns`` (the handoff a standby kept)."""
-        handoff, self.handoff = self.handoff, None
-        if handoff is None or not isinstance(self.controller, PIDController):
-            return
-        got = handoff.before(PID_INTEGRAL, ns, JointState)
-        if got is None:
-            self.get_logger().warning(f'no pid_integral of a predecessor before '
-                                      f'{format_ns(ns)}: the integral starts from zero')
-            return
-        stamp, msg = got
-        last = handoff.before(WRENCH_CMD, stamp + 1, WrenchStamped)
-        self.controller.resume(seconds(stamp), list(msg.position),
-                               wrench_array(last[1]) if last and last[0] == stamp else None)
-        self.resumed_from = stamp
-        self.get_logger().info(f'resumed the pid from its predecessor\'s integral after '
-                               f'{format_ns(stamp)}' + ('' if stamp == ns - self.period_ns
-                                                        else f' (not the tick before '
-                                                        f'{format_ns(ns)}: not bumpless)'))
 
     def _answer(self, ns: int, out: ControlOutput) -> None:
         wrench = fill_wrench(new_wrench(), ns, out.wrench)
@@ -527,31 +371,6 @@ class WrenchController(AchievedInput, TiltrovNode):
         self._velocities.clear()
         self._last_ns = -1
         self._last_msgs = None
-
-    @guarded
-    def _watchdog(self) -> None:
-        """lockstep: report a tick that waits longer than ``input_timeout`` (once per tick)."""
-        tick = self._tick
-        if tick is None or self._warned_tick == tick.ns:
-            return
-        waited = seconds(self.steady_ns() - tick.since)
-        if waited < self.input_timeout:
-            return
-        self._warned_tick = tick.ns
-        self.input_waits += 1
-        missing = self.missing_inputs(tick.ns)
-        self.get_logger().warning(f'waiting for the {" and ".join(missing) or "inputs"} '
-                                  f'stamped {format_ns(tick.ns)} ({waited:.2f} s so far)')
-
-    def missing_inputs(self, ns: int) -> list[str]:
-        """The inputs tick ``ns`` still waits for."""
-        waits = self._waits_for or frozenset()
-        missing = [] if ns in self._setpoints else [SETPOINT]
-        if SETPOINT_VELOCITY in waits and ns not in self._velocities:
-            missing.append(SETPOINT_VELOCITY)
-        if WRENCH_ACHIEVED in waits and self.waits_for_achieved(ns):
-            missing.append(WRENCH_ACHIEVED)
-        return missing
 
     def on_callback_error(self, callback: str, exc: Exception) -> None:
         super().on_callback_error(callback, exc)
