@@ -30,7 +30,6 @@ import functools
 from typing import TYPE_CHECKING, Any
 
 from geometry_msgs.msg import WrenchStamped
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
 from tiltrov_ros.core.names import (
@@ -43,18 +42,11 @@ from tiltrov_ros.core.names import (
 )
 from tiltrov_ros.core.timebase import cdr_stamp_ns
 
+from .qos import HANDOFF_QOS, RELIABLE_QOS
+
 if TYPE_CHECKING:
     from rclpy.node import Node
 
-#: The handoff writers: reliable, transient local, the last few answers (a standby that
-#: starts after the node still gets the state in force).
-HANDOFF_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
-                         durability=DurabilityPolicy.TRANSIENT_LOCAL,
-                         history=HistoryPolicy.KEEP_LAST, depth=10)
-#: The standby's reader of the node's own answers (``wrench_cmd``, ``tilt_cmd``: volatile).
-ANSWER_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
-                        durability=DurabilityPolicy.VOLATILE,
-                        history=HistoryPolicy.KEEP_LAST, depth=10)
 #: Answers kept by stamp per topic (a successor needs the one before the tick it answers).
 KEPT = 10
 #: What each respawnable node hands over: topic -> type, read raw and kept by stamp.
@@ -106,7 +98,7 @@ class Standby:
         self.node: Node = rclpy.create_node(f'{node_name}_standby', context=context,
                                             namespace=namespace)
         for topic, msg_type in TOPICS.get(node_name, {}).items():
-            qos = HANDOFF_QOS if topic in (PID_INTEGRAL, TILT_TARGET) else ANSWER_QOS
+            qos = HANDOFF_QOS if topic in (PID_INTEGRAL, TILT_TARGET) else RELIABLE_QOS
             self.node.create_subscription(msg_type, topic,
                                           functools.partial(self.handoff.keep, topic),
                                           qos, raw=True)

@@ -42,10 +42,11 @@ from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from tiltrov_ros.bag.qos import unmatched
 from tiltrov_ros.core.names import HANDSHAKE, join_namespace
+
+from .qos import HANDSHAKE_READER_QOS, LATCHED_QOS
 
 if TYPE_CHECKING:
     from .base import TiltrovNode
@@ -55,14 +56,6 @@ POLL = 0.01
 #: Topics no handshake covers: the handshake itself (transient local: its order does not
 #: matter) and rclpy's own.
 UNCOVERED = frozenset({'/parameter_events', '/rosout'})
-#: The handshake's writer: reliable, transient local, the latest state of the node.
-STATE_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
-                       durability=DurabilityPolicy.TRANSIENT_LOCAL,
-                       history=HistoryPolicy.KEEP_LAST, depth=1)
-#: Its reader: every writer's latest state (a topic without keys keeps one queue).
-READER_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
-                        durability=DurabilityPolicy.TRANSIENT_LOCAL,
-                        history=HistoryPolicy.KEEP_LAST, depth=100)
 OK, WARN = 0, 1
 #: Values a node adds to its state: the plant its mode, its pacing window (s of sim time,
 #: when the recorder paces it) and the end of the run (ns of sim time: the state there is
@@ -179,8 +172,9 @@ class Handshake:
             return
         self.started = True
         node = self.node
-        self._pub = node.create_publisher(DiagnosticStatus, HANDSHAKE, STATE_QOS)
-        node.create_subscription(DiagnosticStatus, HANDSHAKE, self._on_state, READER_QOS)
+        self._pub = node.create_publisher(DiagnosticStatus, HANDSHAKE, LATCHED_QOS)
+        node.create_subscription(DiagnosticStatus, HANDSHAKE, self._on_state,
+                                 HANDSHAKE_READER_QOS)
         self._timer = node.create_timer(POLL, self._poll,
                                         clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.evaluate()

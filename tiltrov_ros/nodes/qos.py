@@ -57,6 +57,17 @@ LATCHED_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
 #: ``recorder_progress``: the recorder's latest progress for the plant of a paced run, kept
 #: for a reader matched later (reliable, transient local, the last sample).
 PROGRESS_QOS = LATCHED_QOS
+#: The run's handshake (nodes/handshake.py): each node's latest state (:data:`LATCHED_QOS`),
+#: read by every node of the run, every writer's latest kept (a topic without keys keeps
+#: one queue for all its writers).
+HANDSHAKE_READER_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
+                                  durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                                  history=HistoryPolicy.KEEP_LAST, depth=100)
+#: The restart handoff (nodes/handoff.py): reliable, transient local, the last few
+#: answers (a standby that starts after the node still gets the state in force).
+HANDOFF_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                         history=HistoryPolicy.KEEP_LAST, depth=10)
 #: Readers that only want the latest sample (realtime odometry).
 SENSOR_QOS = qos_profile_sensor_data
 
