@@ -12,6 +12,8 @@ does to the stack, beside CPU-bound busy loops (``python3 -c 'while True: pass'`
 * ``realtime``: a recorded realtime ``current_hold`` pid run, quiet and beside the busy
   loops: the largest position error (norm) and attitude error after t = 8 s, from the
   bag's odometry;
+* ``replay``: how closely ``tiltrov replay``'s player keeps its schedule, quiet and
+  beside the busy loops (the residuals' median and 90th percentile);
 * ``restarts``: per launch path (``tiltrov launch --respawn``, and ``ros2 launch
   respawn:=`` where the ros2 command line is installed: the package colcon-built in a
   temporary workspace), the allocator killed about 10 s and the controller about 17 s
@@ -301,11 +303,67 @@ def restarts(tries: int, lockstep_kills: int, busy: int, seed: int = 2026) -> di
     return out
 
 
+def replay(busy: int) -> dict[str, Any]:
+    """How closely a replay keeps its schedule: a recorded 4 s lockstep run replayed at
+    rate 2 by stamp, in this process (its reader matches the player on both sides at once),
+    quiet and beside the busy loops: the residuals of the reception times from the
+    schedule (s), median and 90th percentile."""
+    import threading
+
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import QoSProfile
+
+    from tiltrov_ros.bag.msgdefs import message_class
+    from tiltrov_ros.bag.replay import Player, ReplayOptions
+    from tiltrov_ros.core.timebase import cdr_stamp_ns
+
+    out: dict[str, Any] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        bag = Path(tmp) / 'bag'
+        code, output, _ = _launch('--duration', '4', '--record', str(bag))
+        if code != 0:
+            return {'error': output[-500:]}
+        for label, loops in (('quiet', 0), (f'busy{busy}', busy)):
+            context = Context()
+            rclpy.init(context=context)
+            node = rclpy.create_node('stress_replay', context=context)
+            got: list[tuple[int, int]] = []
+            node.create_subscription(message_class('nav_msgs/msg/Odometry'), '/odom',
+                                     lambda data, info, got=got: got.append(
+                                         (cdr_stamp_ns(data), int(info['received_timestamp']))),
+                                     QoSProfile(depth=1000), raw=True)
+            player = Player(str(bag), rclpy.create_node('stress_player', context=context),
+                            ReplayOptions(rate=2.0, by_stamp=True, topics=['odom']))
+            executor = SingleThreadedExecutor(context=context)
+            executor.add_node(node)
+            with busy_loops(loops):
+                thread = threading.Thread(target=player.run, daemon=True)
+                thread.start()
+                deadline = time.monotonic() + 60
+                while thread.is_alive() and time.monotonic() < deadline:
+                    executor.spin_once(timeout_sec=0.01)
+                for _ in range(50):
+                    executor.spin_once(timeout_sec=0.01)
+            executor.shutdown()
+            rclpy.try_shutdown(context=context)
+            stamps = np.array([s for s, _ in got], dtype=float) / 1e9 / 2.0
+            wall = np.array([w for _, w in got], dtype=float) / 1e9
+            residual = (wall - wall.min()) - (stamps - stamps.min())
+            residual -= np.median(residual)
+            out[label] = {'messages': len(got),
+                          'median_ms': float(np.median(np.abs(residual)) * 1e3),
+                          'p90_ms': float(np.percentile(np.abs(residual), 90) * 1e3)}
+    return out
+
+
 SECTIONS: dict[str, Callable[[argparse.Namespace], dict[str, Any]]] = {
     'short': lambda a: short(a.short_tries),
     'recorded': lambda a: recorded(a.recorded_runs, a.busy),
     'realtime': lambda a: realtime(a.busy),
     'restarts': lambda a: restarts(a.restart_tries, a.lockstep_kills, a.busy),
+    'replay': lambda a: replay(a.busy),
 }
 
 
