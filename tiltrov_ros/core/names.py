@@ -63,6 +63,7 @@ WRENCH_ACHIEVED = 'wrench_achieved'
 #: allocator's servo travel target (no joints when none is under way).
 PID_INTEGRAL = 'pid_integral'
 TILT_TARGET = 'tilt_target'
+HANDOFF_TOPICS = (PID_INTEGRAL, TILT_TARGET)
 CLOCK = '/clock'
 DIAGNOSTICS = '/diagnostics'
 ROBOT_MARKERS = 'robot_markers'

@@ -65,6 +65,7 @@ from tiltrov_ros.bag.writer import BagWriter
 from tiltrov_ros.core.errors import BagError, TiltrovError
 from tiltrov_ros.core.names import (
     CLOCK,
+    HANDOFF_TOPICS,
     HANDSHAKE_TOPICS,
     RECORDER,
     STACK_TOPICS,
@@ -166,7 +167,9 @@ class BagRecorder(RecorderRun, TiltrovNode):
                 # Load the definitions now: a first message must not stall the
                 # recorder while publishers with shallow queues keep sending.
                 message_definition(msgtype)
-                self._subscribe(name, msgtype, [])
+                # The restart handoff is transient local: read so from the start (adapting
+                # the reader to its writer mid-run would lose what came meanwhile).
+                self._subscribe(name, msgtype, [], latched=relative in HANDOFF_TOPICS)
         for relative, msgtype in TF_TOPICS.items():
             name = self.resolve_topic_name(relative)
             if self._in_scope(name) and _importable(msgtype):

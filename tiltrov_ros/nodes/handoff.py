@@ -34,6 +34,7 @@ from sensor_msgs.msg import JointState
 
 from tiltrov_ros.core.names import (
     DOF_NAMES,
+    HANDOFF_TOPICS,
     PID_INTEGRAL,
     TILT_CMD,
     TILT_TARGET,
@@ -98,7 +99,7 @@ class Standby:
         self.node: Node = rclpy.create_node(f'{node_name}_standby', context=context,
                                             namespace=namespace)
         for topic, msg_type in TOPICS.get(node_name, {}).items():
-            qos = HANDOFF_QOS if topic in (PID_INTEGRAL, TILT_TARGET) else RELIABLE_QOS
+            qos = HANDOFF_QOS if topic in HANDOFF_TOPICS else RELIABLE_QOS
             self.node.create_subscription(msg_type, topic,
                                           functools.partial(self.handoff.keep, topic),
                                           qos, raw=True)
