@@ -256,7 +256,8 @@ def _run_with_kills(path: str, extra: Sequence[str], kill_at: Sequence[float],
 
 
 def restarts(tries: int, lockstep_kills: int, busy: int, seed: int = 2026) -> dict[str, Any]:
-    """See the module docstring."""
+    """See the module docstring (``tries`` 0: no realtime runs; ``lockstep_kills`` 0: no
+    lockstep ones)."""
     from tiltrov_ros.bag.losses import missing_stamps
 
     rng = np.random.default_rng(seed)
@@ -269,7 +270,7 @@ def restarts(tries: int, lockstep_kills: int, busy: int, seed: int = 2026) -> di
             paths['ros2 launch'] = ws
         for path, env in paths.items():
             rows: dict[str, Any] = {}
-            for label, loops in (('quiet', 0), (f'busy{busy}', busy)):
+            for label, loops in (('quiet', 0), (f'busy{busy}', busy)) if tries else ():
                 with busy_loops(loops):
                     realtime_args = ('--realtime', '--duration', '30')
                     code, bag, _ = _run_with_kills(path, realtime_args, (), env, tmp)
@@ -363,13 +364,16 @@ SECTIONS: dict[str, Callable[[argparse.Namespace], dict[str, Any]]] = {
     'recorded': lambda a: recorded(a.recorded_runs, a.busy),
     'realtime': lambda a: realtime(a.busy),
     'restarts': lambda a: restarts(a.restart_tries, a.lockstep_kills, a.busy),
+    'restarts_realtime': lambda a: restarts(a.restart_tries, 0, a.busy),
+    'restarts_lockstep': lambda a: restarts(0, a.lockstep_kills, a.busy),
     'replay': lambda a: replay(a.busy),
 }
 
 
 def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('--only', nargs='+', choices=SECTIONS, default=list(SECTIONS))
+    parser.add_argument('--only', nargs='+', choices=SECTIONS,
+                        default=['short', 'recorded', 'realtime', 'replay', 'restarts'])
     parser.add_argument('--busy', type=int, default=2, help='busy loops beside the loaded runs')
     parser.add_argument('--short-tries', type=int, default=20)
     parser.add_argument('--recorded-runs', type=int, default=5)
