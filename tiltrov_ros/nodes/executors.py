@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+import ctypes
+import faulthandler
 import os
 import re
 import signal
@@ -133,6 +135,11 @@ STOP_POLL = 0.2
 #: s (wall): how often a stopping node looks whether the recorder is gone (its reports
 #: wake it at once).
 FINISH_POLL = 0.05
+#: s (wall): the longest the teardown of a stopped node process may take (its executor,
+#: node and DDS participant: milliseconds when well) before it prints every thread's
+#: stack and exits with code 1. It only bounds a hang, below the launchers' 13 s to
+#: SIGTERM, which a process stuck in C++ could not act on.
+TEARDOWN_BOUND = 10.0
 
 
 def main_loop(factory: Callable[[], TiltrovNode], args: list[str] | None, name: str, *,
@@ -152,6 +159,11 @@ def main_loop(factory: Callable[[], TiltrovNode], args: list[str] | None, name: 
     A start-up error (an unreadable parameter file, an invalid parameter, a
     wrong-type YAML value) is printed as one line naming the node and gives exit
     code 1.
+
+    As a program (``args`` None) the process ends here, once the node, its executor
+    and the DDS participant are torn down (:data:`TEARDOWN_BOUND` bounds a hang): the
+    interpreter's own exit, which would destroy the executor's and DDS's C++ threads
+    again in an order of its choosing, is skipped.
     """
     if not init(args, name, signal_handlers=False):
         return 1
@@ -202,17 +214,29 @@ def main_loop(factory: Callable[[], TiltrovNode], args: list[str] | None, name: 
         print(f'{name}: {text}', file=sys.stderr, flush=True)
         code = 1
     finally:
+        if args is None:
+            faulthandler.dump_traceback_later(TEARDOWN_BOUND, exit=True, file=sys.__stderr__)
         if executor is not None:
             executor.shutdown()
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
-        # As a program (args None) the process ends next: the handlers stay, so a
-        # late signal cannot raise in the interpreter's exit.
-        if args is not None:
+        if args is None:
+            faulthandler.cancel_dump_traceback_later()
+        else:
             for sig, handler in previous.items():
                 signal.signal(sig, handler)
+    if args is None:
+        end_process(code)
     return code
+
+
+def end_process(code: int) -> None:
+    """Flush Python's and C's output streams and end the process with ``code`` now."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    ctypes.CDLL(None).fflush(None)
+    os._exit(code)
 
 
 def stand_by(factory: Any, name: str, context: Context, stop: threading.Event,
