@@ -299,9 +299,8 @@ def _edges(grid: FloatArray, spacing: FloatArray) -> list[tuple[int, int]]:
 
 
 class _Follow:
-    """The viability game on the grid (see the module docstring), its links found
-    lazily: a configuration is checked against the configurations of a neighbouring
-    grid point only until one link to a viable one is found."""
+    """Configurations within tolerance at a current deviation, and the links between
+    those of neighbouring deviations (see the module docstring)."""
 
     def __init__(self, demands: _Demands, rate: float, std: FloatArray,
                  time_constant: FloatArray) -> None:
@@ -404,7 +403,10 @@ class _Follow:
 class _Game:
     """Arc consistency over the grid: a component of configurations (the servos move
     freely within one while the demand stays) stays while each neighbouring grid point
-    has a viable configuration linked to one of its members."""
+    has a viable configuration linked to one of its members. Links are found lazily: a
+    configuration is checked against those of a neighbouring point only until one link
+    to a viable one is found, and a grid step is bisected only when no direct link
+    does."""
 
     def __init__(self, follow: _Follow, grid: FloatArray, nodes: list[FloatArray],
                  neighbours: list[list[int]]) -> None:
