@@ -243,17 +243,50 @@ def test_robot_factors_are_configurations_whose_levels_set_the_robot() -> None:
 
 
 def test_the_verdict_of_a_run() -> None:
+    """physics first (not produced on the full circle, or its wander beyond the full
+    circle's reach), then servo_range (not produced within the range, or its wander
+    beyond the range's reach where the full circle follows it), else control; the
+    counterfactual run is no part of it."""
     from tiltrov_ros.core.campaign import verdict
+    from tiltrov_ros.core.hold import Reach
 
-    reachable = _metrics(steady_shortfall_ratio_full_circle=0.2)
-    hole = _metrics(steady_shortfall_ratio_full_circle=3.0)
-    assert verdict(True, reachable, None) == 'held'
-    assert verdict(False, reachable, True) == 'servo_range'
-    assert verdict(False, hole, True) == 'servo_range'      # past vertical it holds anyway
-    assert verdict(False, hole, False) == verdict(False, hole, None) == 'physics'
-    assert verdict(False, reachable, False) == 'control'
-    assert verdict(False, _metrics(), None) == 'control'    # no oracle: not physics
-    assert verdict(False, None, None) == 'control'          # the run raised
+    reachable = _metrics(steady_shortfall_ratio=0.2, steady_shortfall_ratio_full_circle=0.2)
+    narrow = _metrics(steady_shortfall_ratio=3.0, steady_shortfall_ratio_full_circle=0.2)
+    hole = _metrics(steady_shortfall_ratio=3.0, steady_shortfall_ratio_full_circle=3.0)
+    followed, lost, beyond = Reach(True), Reach(False, True), Reach(False, False)
+    assert verdict(True, hole, beyond) == 'held'
+    assert verdict(False, hole, None) == verdict(False, hole, followed) == 'physics'
+    assert verdict(False, reachable, beyond) == 'physics'     # no servo follows it
+    assert verdict(False, narrow, None) == verdict(False, narrow, followed) == 'servo_range'
+    assert verdict(False, reachable, lost) == 'servo_range'   # the range's reach
+    assert verdict(False, reachable, Reach(False)) == 'servo_range'
+    assert verdict(False, reachable, followed) == 'control'
+    assert verdict(False, reachable, None) == verdict(False, reachable, Reach()) == 'control'
+    assert verdict(False, _metrics(), None) == 'control'      # no oracle: not physics
+    assert verdict(False, None, None) == 'control'            # the run raised
+
+
+def test_a_hold_file_and_a_campaign_file_give_a_hold_criterion(tmp_path: Path) -> None:
+    from tiltrov_ros.core.campaign import load_hold
+
+    shipped = load_hold(STATION_KEEPING)
+    assert shipped.name == 'station_keeping' and len(shipped.bounds) == 3
+    assert [len(shipped.applicable(c, 'robust')) for c in ('pd', 'pid', 'switching')] == [2, 2, 1]
+    file = tmp_path / 'mine.yaml'
+    file.write_text(yaml.safe_dump({'angle_unit': 'deg', 'hold': [
+        {'metric': 'final_error', 'angle': 3.0, 'gains': ['soft'], 'allocators': ['paper']}]}))
+    mine = load_hold(file)
+    assert mine.name == 'mine' and dict(mine.bounds[0].limits)['yaw'] == pytest.approx(3 * DEG)
+    assert mine.applicable('pd', 'paper', 'soft') == mine.bounds
+    assert mine.applicable('pd', 'robust', 'soft') == () == mine.applicable('pd', 'paper')
+    file.write_text(yaml.safe_dump({'hold': [{'metric': 'hold', 'max': 1}]}))
+    with pytest.raises(CampaignError, match=r"mine.yaml: hold\[0\].metric: got 'hold'"):
+        load_hold(file)
+    file.write_text(yaml.safe_dump({'name': 'x'}))
+    with pytest.raises(CampaignError, match=r'mine\.yaml: hold: missing'):
+        load_hold(file)
+    with pytest.raises(CampaignError, match='not found'):
+        load_hold(tmp_path / 'none.yaml')
 
 
 def _metrics(**changes: Any) -> dict[str, Any]:

@@ -220,7 +220,7 @@ def test_hovering_is_ok_and_quiet_and_a_real_shortfall_warns(rig) -> None:
 def test_a_steady_demand_no_tilt_produces_is_reported_live(rig) -> None:
     """Two seconds of the steady wrench of a hole in the attainable set (a pitched
     setpoint in a current across: no tilt produces its surge, core/steady.py): WARN,
-    "cannot hold this setpoint with these servos", with the demand and its shortfall;
+    "steady demand out of the servo range's reach", with the demand and its shortfall;
     a thruster failing forgets it."""
     ros, _, _, pub = rig
     node = _allocator(ros)
@@ -231,12 +231,12 @@ def test_a_steady_demand_no_tilt_produces_is_reported_live(rig) -> None:
         pub.publish(wrench(i * TICK, hole))
         assert ros.spin_until(lambda n=i + 1: node.ticks == n)
     level, message, values = node.diagnostic_status()
-    assert level == 1 and message.startswith('cannot hold this setpoint with these servos: '
-                                             'the steady demand is short by X ')
-    assert values['cannot_hold'] and values['steady_demand'] == pytest.approx(hole)
+    assert level == 1 and message.startswith("steady demand out of the servo range's reach: "
+                                             'short by X ')
+    assert values['out_of_reach'] and values['steady_demand'] == pytest.approx(hole)
     assert abs(values['steady_shortfall'][0]) > 1.0
     node.set_parameters([Parameter('failed_thrusters', value=[2])])
-    assert not node.diagnostic_status()[2]['cannot_hold']
+    assert not node.diagnostic_status()[2]['out_of_reach']
 
 
 def test_run_time_parameters_are_validated(rig) -> None:

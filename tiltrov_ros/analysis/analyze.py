@@ -39,6 +39,7 @@ from tiltrov_ros.analysis.runs import (
     write_run,
 )
 from tiltrov_ros.core.errors import BagError, TiltrovError
+from tiltrov_ros.core.hold import HoldCriterion
 from tiltrov_ros.core.metrics import write_metrics
 from tiltrov_ros.core.names import normalize_namespace
 from tiltrov_ros.core.runlog import RunLog
@@ -176,8 +177,10 @@ def notes_of(rec: Recording) -> list[str]:
 
 
 def analyze(bags: Sequence[str | Path], out: Path, *, namespace: str | None = None,
-            figures: bool = True, dpi: int = 100, progress: bool | None = None) -> Analysis:
-    """Read ``bags``, write their files and figures into ``out`` (module docstring).
+            figures: bool = True, dpi: int = 100, progress: bool | None = None,
+            criterion: HoldCriterion | None = None) -> Analysis:
+    """Read ``bags``, write their files and figures into ``out`` (module docstring);
+    metrics.json's ``hold`` by ``criterion`` (default: the shipped station-keeping one).
 
     Raises :class:`InputError` for a bag that cannot be analyzed (before
     anything is written) and OSError when the results cannot be written.
@@ -195,7 +198,8 @@ def analyze(bags: Sequence[str | Path], out: Path, *, namespace: str | None = No
     result = Analysis([], {}, [note for rec in recordings for note in notes_of(rec)])
     single = len(recordings) == 1
     for rec in recordings:
-        paths, result.metrics[rec.name] = write_run(rec.log, out if single else out / rec.name)
+        paths, result.metrics[rec.name] = write_run(rec.log, out if single else out / rec.name,
+                                                    criterion)
         result.written += paths
     if not single:
         result.written.append(write_metrics(result.metrics, out / 'metrics.json'))

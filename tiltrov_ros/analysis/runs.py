@@ -14,7 +14,9 @@ from typing import Any
 import numpy as np
 import yaml
 
+from tiltrov_ros.core.campaign import load_hold
 from tiltrov_ros.core.errors import TiltrovError
+from tiltrov_ros.core.hold import HoldCriterion
 from tiltrov_ros.core.metrics import compute_metrics, control_errors, write_metrics
 from tiltrov_ros.core.names import (
     DOF_NAMES,
@@ -90,11 +92,24 @@ def write_control_csv(log: RunLog, path: str | Path) -> Path:
     return target
 
 
-def write_run(log: RunLog, out: Path) -> tuple[list[Path], dict[str, Any]]:
-    """run.npz, control.csv and metrics.json of one run into ``out``; paths and metrics."""
+def hold_criterion(path: Path | None) -> HoldCriterion | None:
+    """The hold criterion of a campaign or hold file (``--hold``; None: the shipped one),
+    or :class:`InputError`."""
+    if path is None:
+        return None
+    try:
+        return load_hold(path)
+    except TiltrovError as exc:
+        raise InputError(one_line(exc)) from exc
+
+
+def write_run(log: RunLog, out: Path, criterion: HoldCriterion | None = None
+              ) -> tuple[list[Path], dict[str, Any]]:
+    """run.npz, control.csv and metrics.json of one run into ``out``; paths and metrics
+    (``hold`` judged by ``criterion``, default the shipped station-keeping one)."""
     out.mkdir(parents=True, exist_ok=True)
     log.save_npz(out / 'run.npz')
-    metrics = compute_metrics(log)
+    metrics = compute_metrics(log, criterion=criterion)
     paths = [out / 'run.npz', write_control_csv(log, out / 'control.csv'),
              write_metrics(metrics, out / 'metrics.json')]
     return paths, metrics

@@ -28,13 +28,16 @@ from tiltrov_ros.core.steady import FULL_CIRCLE
 
 #: The name of a campaign's ``--robot`` file in an exported run's folder.
 ROBOT_COPY = 'robot.yaml'
+#: The campaign's hold criterion in an exported run's folder (``tiltrov sim --hold``).
+HOLD_COPY = 'hold.yaml'
 
 
 class RunTask(NamedTuple):
     """One run: its id (``s00042-pid-robust``), sample index, configuration name, the
-    resolved stack it runs, the hold bounds that apply to it and, for the verdict of a
-    run that does not hold, the same stack with servos turning all the way round (None
-    when they already do: :func:`counterfactual`)."""
+    resolved stack it runs, the hold bounds that apply to it, for the runs that do not
+    hold the same stack with servos turning all the way round (evidence beside the
+    verdict; None when they already do: :func:`counterfactual`) and the name of the
+    hold criterion (the campaign's)."""
 
     run_id: str
     sample: int
@@ -42,6 +45,7 @@ class RunTask(NamedTuple):
     config: StackConfig
     bounds: tuple[Bound, ...] = ()
     counterfactual: StackConfig | None = None
+    criterion: str = ''
 
 
 def run_id(sample: int, configuration: str) -> str:
@@ -112,13 +116,28 @@ class Plan:
             for c in self.spec.configurations:
                 stack = self.stack(s, c)
                 out.append(RunTask(run_id(s.index, c.name), s.index, c.name, stack,
-                                   self.spec.bounds(c), counterfactual(stack)))
+                                   self.spec.bounds(c), counterfactual(stack), self.spec.name))
         return out
+
+    def hold_document(self, configuration: Configuration) -> dict[str, Any]:
+        """The campaign's hold criterion for the runs of ``configuration`` as a hold file
+        (:func:`~tiltrov_ros.core.campaign.load_hold`): the campaign's name and angle
+        unit, and the bounds of its ``hold`` section that apply to the configuration, as
+        the file gives them, without the configurations they are limited to."""
+        doc: Any = {}
+        if self.spec.source is not None and Path(self.spec.source).is_file():
+            doc = yaml.safe_load(Path(self.spec.source).read_text(encoding='utf-8'))
+        entries = list(doc.get('hold') or []) if isinstance(doc, dict) else []
+        kept = [{k: v for k, v in entry.items() if k not in ('controllers', 'allocators',
+                                                             'gains')}
+                for entry, bound in zip(entries, self.spec.hold) if bound.applies(configuration)]
+        return {'name': self.spec.name, 'angle_unit': self.spec.angle_unit, 'hold': kept}
 
     def export(self, sample: int, configuration: str, folder: Path) -> list[Path]:
         """The files that run ``(sample, configuration)`` again with ``tiltrov sim``:
-        scenario.yaml, wrench_controller.yaml, thrust_allocator.yaml and
-        reproduce.sh (one command; its metrics.json lands in ``sim/``)."""
+        scenario.yaml, wrench_controller.yaml, thrust_allocator.yaml, hold.yaml (the
+        campaign's hold criterion) and reproduce.sh (one command; its metrics.json lands
+        in ``sim/``)."""
         config = self.spec.configuration(configuration)
         drawn = draw_sample(self.spec, sample)
         document = dict(drawn.document)
@@ -137,6 +156,7 @@ class Plan:
             'wrench_controller.yaml': {'wrench_controller': {'ros__parameters': ros_controller}},
             'thrust_allocator.yaml': {'thrust_allocator': {
                 'ros__parameters': _plain(asdict(self.allocators[configuration]))}},
+            HOLD_COPY: self.hold_document(config),
         }
         written = []
         for name, doc in files.items():
@@ -156,12 +176,15 @@ class Plan:
 
 def reproduce_command(config: Configuration, robot_file: bool = False) -> str:
     """The ``tiltrov sim`` command of a run, from inside its exported folder
-    (``robot_file``: with the campaign's ``--robot`` file, copied as robot.yaml)."""
+    (``robot_file``: with the campaign's ``--robot`` file, copied as robot.yaml; the
+    campaign's hold criterion from hold.yaml, so that metrics.json's ``hold`` is the
+    row's)."""
     return shlex.join(['tiltrov', 'sim', '--scenario', 'scenario.yaml',
                        '--controller', config.controller, '--allocator', config.allocator,
                        '--controller-file', 'wrench_controller.yaml',
                        '--allocator-file', 'thrust_allocator.yaml',
-                       *(['--robot', ROBOT_COPY] if robot_file else []), '--out', 'sim'])
+                       *(['--robot', ROBOT_COPY] if robot_file else []),
+                       '--hold', HOLD_COPY, '--out', 'sim'])
 
 
 def _plain(values: dict[str, Any]) -> dict[str, Any]:

@@ -9,7 +9,7 @@ and percentiles (50, 90, 95, max) over the runs that did not fail of
 
 and the worst runs: failed ones first, then by final position error. The runs
 that do not hold are counted by verdict (``servo_range``, ``physics``,
-``control``: :func:`tiltrov_ros.core.campaign.verdict`) and the worst of each
+``control``: :func:`tiltrov_ros.core.hold.verdict`) and the worst of each
 verdict listed; with robot factors (``compare.robot``) a table compares the
 levels of the last factor side by side.
 """
@@ -27,7 +27,8 @@ import numpy as np
 
 from tiltrov_ros.campaign.table import number
 from tiltrov_ros.core.campaign import VERDICTS, Bound, CampaignSpec
-from tiltrov_ros.core.campaign.spec import HELD, TIME_METRICS
+from tiltrov_ros.core.campaign.spec import TIME_METRICS
+from tiltrov_ros.core.hold import HELD
 from tiltrov_ros.core.names import DOF_NAMES
 
 PERCENTILES = (50, 90, 95, 100)
@@ -120,12 +121,16 @@ def factor_rows(spec: CampaignSpec, summaries: Sequence[ConfigSummary]) -> list[
 
 #: What the verdicts mean, in summary.md.
 VERDICT_TEXT = (
-    'A run that does not hold gets a verdict: **servo_range** when the same run with the '
-    'servos turning all the way round (+-180 deg, nothing else changed) holds; '
-    '**physics** when no tilt on the full circle produces the wrench that holds the '
-    'final setpoint against the mean current (the steady-wrench oracle, short by more '
-    'than the wrench tolerance); **control** otherwise (the controller\'s or the '
-    'allocator\'s doing). docs/campaign.md, "Verdicts".')
+    'A run that does not hold gets a verdict, judged in this order: **physics** when no '
+    'tilt on the full circle produces the wrench that holds the final setpoint against '
+    'the mean current (the steady-wrench oracle, short by more than the wrench '
+    'tolerance), or not even servos turning all the way round follow it while the '
+    'current wanders (the wander oracle); **servo_range** when no tilt within the servo '
+    'range produces it, or no path of tilts within the range, at the servo rate, follows '
+    'it while the current wanders, where the full circle would; **control** otherwise '
+    '(the servos could: the controller\'s or the allocator\'s doing). The same run with '
+    'servos turning all the way round (+-180 deg) is run too, as evidence '
+    '(counterfactual_holds). docs/campaign.md, "Verdicts".')
 
 
 def _errors(row: Mapping[str, str]) -> str:

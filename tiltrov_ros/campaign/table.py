@@ -7,16 +7,19 @@ Columns, in order:
 * ``status`` (``ok`` or ``failed``: the run raised), ``holds`` (1 or 0, by the
   campaign's ``hold`` bounds; a failed run does not hold), ``violations`` (the
   bounds it missed, ``; ``-separated), ``verdict`` (``held``, ``servo_range``,
-  ``physics``, ``control``: :func:`tiltrov_ros.core.campaign.verdict`),
+  ``physics``, ``control``: :func:`tiltrov_ros.core.hold.verdict`; the same as
+  ``hold.verdict`` where the run has a ``hold``),
   ``counterfactual_holds`` (1 or 0: the same run with servos at +-180 deg, run
-  for the runs that do not hold; empty when not run) and
+  for the runs that do not hold, evidence beside the verdict; empty when not run)
+  and
   ``counterfactual_violations``, ``error`` (the exception of a failed run),
   ``seconds`` (its wall time on the worker, the counterfactual's included),
   ``worker`` (host:pid);
 * ``param.<key>``: the sample's parameters
   (:attr:`tiltrov_ros.core.campaign.Sample.params`);
 * every key of ``metrics.json``, nested keys joined by dots
-  (``final_error.x``, ``run.controller``), empty where the value is null.
+  (``final_error.x``, ``run.controller``, ``hold.verdict``), empty where the value
+  is null (a null ``hold``: its four columns empty).
 
 Floats are written with ``repr``, so reading them back gives the same numbers.
 CSV, not Parquet: each batch of rows is appended and flushed, so a campaign
@@ -80,15 +83,21 @@ def row_metrics(row: Mapping[str, str]) -> dict[str, Any]:
             text = row[name]
             if text == '':
                 out[key] = None
-            elif name.startswith('run.'):
+            elif name.startswith('run.') or isinstance(shape, str):
                 out[key] = text
-            elif isinstance(shape, int) and not isinstance(shape, bool):
+            elif isinstance(shape, bool):
+                out[key] = text == '1'
+            elif isinstance(shape, int):
                 out[key] = int(text)
             else:
                 out[key] = float(text)
         return out
 
-    return rebuild(metrics_template(), '')
+    metrics = rebuild(metrics_template(), '')
+    hold = metrics.get('hold')
+    if isinstance(hold, Mapping) and all(v is None for v in hold.values()):
+        metrics['hold'] = None              # a run without a hold verdict: null
+    return metrics
 
 
 def read_table(path: Path) -> tuple[list[str], list[dict[str, str]]]:

@@ -5,6 +5,7 @@
     tiltrov analyze runs/pd/bag --out runs/pd/analysis
     tiltrov analyze runs/pd/bag runs/switching/bag runs/pid/bag --out runs/compare
     tiltrov analyze runs/fleet/bag --namespace robot1 --out runs/robot1
+    tiltrov analyze runs/pd/bag --hold my_criterion.yaml --out runs/pd/analysis
 
 What is written: :func:`tiltrov_ros.analysis.analyze.analyze`. Bad input (no such
 bag, not a bag, a bag without the stack's topics) ends with one line on stderr
@@ -19,7 +20,7 @@ from pathlib import Path
 import sys
 
 from tiltrov_ros.analysis.analyze import analyze
-from tiltrov_ros.analysis.runs import summary_line
+from tiltrov_ros.analysis.runs import hold_criterion, summary_line
 
 from .output import print_written, report_errors
 
@@ -32,6 +33,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--namespace', default=None, metavar='NS',
                         help="the stack's namespace in the bags (default: the namespace of "
                              "the bag's one odom topic)")
+    parser.add_argument('--hold', type=Path, metavar='FILE',
+                        help="hold criterion of metrics.json's hold: a campaign file (its "
+                             'hold section) or a hold file (default: '
+                             'config/campaigns/station_keeping.yaml)')
     parser.add_argument('--no-figures', action='store_true', help='skip the PNG figures')
     parser.add_argument('--dpi', type=int, default=100, help='figure resolution (default 100)')
 
@@ -39,7 +44,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     def task() -> int:
         result = analyze(args.bags, args.out, namespace=args.namespace,
-                         figures=not args.no_figures, dpi=args.dpi)
+                         figures=not args.no_figures, dpi=args.dpi,
+                         criterion=hold_criterion(args.hold))
         for note in result.notes:
             print(f'tiltrov analyze: note: {note}', file=sys.stderr)
         for name, values in result.metrics.items():

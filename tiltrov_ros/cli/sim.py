@@ -6,11 +6,13 @@
     tiltrov sim --scenario trajectory --compare            # pd, pid and switching overlaid
     tiltrov sim --scenario my_dive.yaml --duration 20 --allocator paper
     tiltrov sim --scenario current_hold --robot robot_past_vertical   # servos past vertical
+    tiltrov sim --scenario my_hold.yaml --hold config/campaigns/servo_range.yaml
 
 One run writes into ``--out``: ``run.npz`` (the whole RunLog,
 :meth:`RunLog.save_npz`), ``control.csv`` (the control grid, one row per tick,
 for spreadsheets), ``metrics.json`` (:func:`tiltrov_ros.core.metrics.
-compute_metrics`) and the figures of :mod:`tiltrov_ros.analysis.figures`. With
+compute_metrics`; its ``hold`` judged by the shipped station-keeping criterion or
+``--hold``'s) and the figures of :mod:`tiltrov_ros.analysis.figures`. With
 ``--compare`` each controller's data go into ``--out/<controller>/`` and the
 figures, runs overlaid, into ``--out``.
 
@@ -27,6 +29,7 @@ import sys
 
 from tiltrov_ros.analysis.runs import (
     InputError,
+    hold_criterion,
     resolve,
     simulate,
     summary_line,
@@ -63,6 +66,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="simulated seconds (default: the scenario's)")
     parser.add_argument('--out', type=Path, default=Path('runs/sim'), metavar='DIR',
                         help='output directory (default: runs/sim)')
+    parser.add_argument('--hold', type=Path, metavar='FILE',
+                        help="hold criterion of metrics.json's hold: a campaign file (its "
+                             'hold section) or a hold file (default: '
+                             'config/campaigns/station_keeping.yaml)')
     parser.add_argument('--no-figures', action='store_true', help='skip the PNG figures')
     parser.add_argument('--dpi', type=int, default=100, help='figure resolution (default 100)')
 
@@ -82,12 +89,13 @@ def _run(args: argparse.Namespace) -> list[Path]:
     kinds = _controllers(args)
     configs = [resolve(args.scenario, kind, args.allocator, controller_file=args.controller_file,
                        allocator_file=args.allocator_file, robot=args.robot) for kind in kinds]
+    criterion = hold_criterion(args.hold)
     logs = [simulate(config, args.duration) for config in configs]
     written: list[Path] = []
     out: Path = args.out
     for config, log in zip(configs, logs):
         paths, metrics = write_run(log, out if args.compare is None
-                                   else out / config.controller.kind)
+                                   else out / config.controller.kind, criterion)
         written += paths
         print(summary_line(metrics))
     if not args.no_figures:

@@ -68,6 +68,14 @@ The steady wrench (:mod:`tiltrov_ros.core.steady`)
     ``steady_shortfall_ratio_full_circle`` the same with servos turning all
     the way round. ``None`` without those metas or a moving final setpoint.
 
+Holding (:mod:`tiltrov_ros.core.hold`)
+    ``hold``: ``{criterion, holds, verdict, reach}`` for a pd or pid run whose
+    final setpoint stands still and which has no thruster fault, else ``None``:
+    the hold criterion's name (the shipped station-keeping one, or a
+    campaign's), whether the run meets its bounds, the verdict (``held``,
+    ``physics``, ``servo_range``, ``control``) and the wander oracle's answer
+    where the verdict needed it (:mod:`tiltrov_ros.core.wander`; else None).
+
 A quantity that cannot be computed (no ticks, no max_thrust in the meta) is
 ``None`` (``null`` in JSON), never NaN.
 """
@@ -84,6 +92,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tiltrov_ros.core.allocation import infeasible_rows
+from tiltrov_ros.core.bounds import Bound
+from tiltrov_ros.core.hold import HoldCriterion, judge
 from tiltrov_ros.core.kinematics import euler_from_quat_rows, ssa
 from tiltrov_ros.core.names import DOF_NAMES, SERVOS, THRUSTERS, WRENCH_DOFS
 from tiltrov_ros.core.runlog import RunLog
@@ -207,14 +217,23 @@ def settling_times(err: ControlErrors) -> tuple[list[float | None], FloatArray]:
     return out, band
 
 
-def _steady(log: RunLog) -> SteadyVerdict | None:
-    """The oracle at the last tick's setpoint, when it stands still (module docstring)."""
+def final_setpoint(log: RunLog) -> FloatArray | None:
+    """The last tick's setpoint attitude (w, x, y, z) when it stands still, else None."""
     if not len(log.tc) or np.any(log.setpoint_velocity[-1] != 0.0):
         return None
-    return from_meta(log.meta, log.setpoint_quaternion[-1])
+    out: FloatArray = log.setpoint_quaternion[-1]
+    return out
 
 
-def compute_metrics(log: RunLog, *, max_thrust: float | None = None) -> dict[str, Any]:
+def _steady(log: RunLog) -> SteadyVerdict | None:
+    """The oracle at the last tick's setpoint, when it stands still (module docstring)."""
+    quaternion = final_setpoint(log)
+    return None if quaternion is None else from_meta(log.meta, quaternion)
+
+
+def compute_metrics(log: RunLog, *, max_thrust: float | None = None,
+                    criterion: HoldCriterion | None = None,
+                    bounds: tuple[Bound, ...] | None = None) -> dict[str, Any]:
     """Every metric of the module docstring, as a JSON-ready dict.
 
     Parameters
@@ -224,6 +243,10 @@ def compute_metrics(log: RunLog, *, max_thrust: float | None = None) -> dict[str
     max_thrust : float, optional
         Thrust limit [N]; default ``log.meta['max_thrust']``. Without either, the
         saturation and feasibility keys are None.
+    criterion : HoldCriterion, optional
+        What ``hold`` judges the run by (default: the shipped station-keeping
+        criterion, :func:`tiltrov_ros.core.hold.shipped`); ``bounds``: those of its
+        bounds that apply to the run, when the caller knows (a campaign's).
 
     Returns
     -------
@@ -300,6 +323,8 @@ def compute_metrics(log: RunLog, *, max_thrust: float | None = None) -> dict[str
         verdict.in_range.ratio)
     metrics['steady_shortfall_ratio_full_circle'] = None if verdict is None else _num(
         verdict.full_circle.ratio)
+    metrics['hold'] = judge(metrics, log.meta, final_setpoint(log), criterion, bounds) \
+        if n else None
     metrics['ticks'] = n
     metrics['unmatched_ticks'] = ticks - n
     metrics['duration'] = end

@@ -351,6 +351,9 @@ class StackConfig:
             'robot': self.robot.as_dict(),
             'disturbances': self.scenario.disturbances.describe(),
             'allocator_weights': list(self.allocator.weights),
+            # Whether a run gets a hold verdict (core/hold.py): none with a failed thruster.
+            'faults': [{'thruster': f.index + 1, 'at': f.at, 'detected_after': f.detected_after}
+                       for f in self.scenario.faults],
         }
 
 

@@ -20,12 +20,14 @@ circle (+-180 deg). A range at least 180 deg wide already holds every thrust
 line (a tilt and its twin pi away are the same line, the thrust negated): the
 two answers differ only for narrower ranges. What a wide range changes is
 whether the servos can *reach* the configuration continuously, which no
-static test answers; the campaign's counterfactual run does
-(docs/campaign.md, "Verdicts").
+static test answers: the wander oracle (:mod:`.wander`) asks it of the demand
+as the current wanders (docs/campaign.md, "Verdicts").
 
 The result's ``ratio`` is the largest shortfall in units of its tolerance:
 at most 1 means attainable. :class:`HoldMonitor` asks the same of the demand
-the allocator sees, live (the ``thrust_allocator`` node's ``/diagnostics``).
+the allocator sees, live (the ``thrust_allocator`` node's ``/diagnostics``): reach
+only; whether a run held, and why not, is :mod:`.hold`'s, after the run, with the
+wander of the current (:mod:`.wander`).
 """
 
 from __future__ import annotations
@@ -187,15 +189,17 @@ SHORT_FRACTION = 0.5
 
 
 class HoldMonitor:
-    """What the allocator says live: "cannot hold this setpoint with these servos".
+    """What the allocator says live: whether the steady demand is within the servo
+    range's reach. Reach only, never a verdict on holding: whether a run holds, and
+    why not, is judged after the run (:mod:`tiltrov_ros.core.hold`).
 
     Fed every tick with the wrench asked for and the one achieved
     (:meth:`update`); at the end of each window of :data:`HOLD_WINDOW` it judges
     the window: when the demand was steady (:data:`STEADY_SPREAD`) and short at
     :data:`SHORT_FRACTION` of the ticks at least, the :class:`Oracle` is asked
-    about its mean. ``verdict`` is then that judgement (``verdict.in_range`` not
-    attainable: the servos cannot produce what holding the setpoint takes;
-    ``verdict.full_circle``: whether servos turning all the way round could), else
+    about its mean. ``verdict`` is then that answer (``verdict.in_range`` not
+    attainable: no tilt within the range produces the demand;
+    ``verdict.full_circle``: whether servos turning all the way round would), else
     None. The window's ticks come from the control period; a stamp going back
     calls for :meth:`reset`.
     """
@@ -214,7 +218,7 @@ class HoldMonitor:
         self.verdict: SteadyVerdict | None = None
 
     @property
-    def cannot_hold(self) -> bool:
+    def out_of_reach(self) -> bool:
         """The last window's steady demand lies beyond the servo range's reach."""
         return self.verdict is not None and not self.verdict.in_range.attainable
 
@@ -235,11 +239,11 @@ class HoldMonitor:
             self.verdict = None
 
     def report(self) -> tuple[str, dict[str, Any]]:
-        """For /diagnostics: :meth:`message` and the values (``cannot_hold``, the last
+        """For /diagnostics: :meth:`message` and the values (``out_of_reach``, the last
         judged ``steady_demand`` and its ``steady_shortfall``, N and N m)."""
         v = self.verdict
         return self.message(), {
-            'cannot_hold': self.cannot_hold,
+            'out_of_reach': self.out_of_reach,
             'steady_demand': [] if v is None else [float(x) for x in v.wrench],
             'steady_shortfall': [] if v is None else [float(x) for x in v.in_range.shortfall]}
 
@@ -251,7 +255,7 @@ class HoldMonitor:
         short = ', '.join(f'{dof} {value:+.3g}' for dof, value, tol in
                           zip(WRENCH_DOFS, v.in_range.shortfall, self.oracle.tolerances)
                           if abs(value) > tol)
-        why = ('servos turning past vertical could' if v.full_circle.attainable
-               else 'no tilt on the full circle produces it either')
-        return (f'cannot hold this setpoint with these servos: the steady demand is short '
-                f'by {short} at every tilt in range ({why})')
+        beyond = ('within reach of servos turning past vertical' if v.full_circle.attainable
+                  else 'beyond the reach of every tilt on the full circle too')
+        return (f'steady demand out of the servo range\'s reach: short by {short} at every '
+                f'tilt in range ({beyond})')

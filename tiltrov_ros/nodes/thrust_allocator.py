@@ -9,8 +9,9 @@ The switching baseline fixes the tilts itself through ``tilt_request``
 (parameter ``tilt_request``: ``auto``, ``required``, ``ignored``; how requests
 pair with wrenches: nodes/tilt_request.py).
 
-``/diagnostics`` says "cannot hold this setpoint with these servos" (WARN) when the
-core's :class:`~tiltrov_ros.core.steady.HoldMonitor` finds so (all four thrusters).
+``/diagnostics`` says "steady demand out of the servo range's reach" (WARN) when the
+core's :class:`~tiltrov_ros.core.steady.HoldMonitor` finds so (all four thrusters):
+reach only, not a verdict on holding (metrics.json's ``hold``, after the run).
 
 The launcher sets ``required`` for the switching controller and ``ignored``
 otherwise. A repeated wrench stamp re-publishes the cached answer without

@@ -30,19 +30,17 @@ Running the samples (Dask), the table and the summary are
 :mod:`tiltrov_ros.campaign`.
 """
 
-from tiltrov_ros.core.campaign.parse import load_campaign, parse_campaign
+from tiltrov_ros.core.bounds import Bound, violations
+from tiltrov_ros.core.campaign.parse import load_campaign, load_hold, parse_campaign
 from tiltrov_ros.core.campaign.sampling import Sample, draw_sample, draw_samples
 from tiltrov_ros.core.campaign.spec import (
-    VERDICTS,
-    Bound,
     CampaignSpec,
     Configuration,
     Distribution,
     metrics_template,
-    verdict,
-    violations,
 )
+from tiltrov_ros.core.hold import VERDICTS, verdict
 
 __all__ = ['VERDICTS', 'Bound', 'CampaignSpec', 'Configuration', 'Distribution', 'Sample',
-           'draw_sample', 'draw_samples', 'load_campaign', 'metrics_template',
+           'draw_sample', 'draw_samples', 'load_campaign', 'load_hold', 'metrics_template',
            'parse_campaign', 'verdict', 'violations']

@@ -15,11 +15,11 @@ from typing import Any
 
 import yaml
 
+from tiltrov_ros.core.bounds import Bound
 from tiltrov_ros.core.campaign.sampling import draw_sample
 from tiltrov_ros.core.campaign.spec import (
     ROBOT_ANGLE_KEYS,
     TIME_METRICS,
-    Bound,
     CampaignSpec,
     Configuration,
     CurrentDraw,
@@ -33,7 +33,8 @@ from tiltrov_ros.core.campaign.spec import (
 )
 from tiltrov_ros.core.controllers import CONTROLLER_KINDS, Gains
 from tiltrov_ros.core.errors import CampaignError, ParameterError, TiltrovError
-from tiltrov_ros.core.names import DOF_NAMES
+from tiltrov_ros.core.hold import HoldCriterion
+from tiltrov_ros.core.names import ALLOCATOR_MODES, DOF_NAMES
 from tiltrov_ros.core.params import RobotParams
 from tiltrov_ros.core.scenarios import load_scenario_document
 
@@ -42,6 +43,8 @@ Level = tuple[str, tuple[tuple[str, RobotValue], ...]]
 
 _TOP_KEYS = {'name', 'description', 'seed', 'samples', 'duration', 'angle_unit', 'base',
              'reference', 'disturbances', 'robot', 'faults', 'compare', 'hold'}
+#: The keys of a hold file (:func:`load_hold`).
+_HOLD_KEYS = {'name', 'angle_unit', 'hold'}
 _NAME = re.compile(r'^[A-Za-z0-9_]+$')
 
 
@@ -57,6 +60,29 @@ def load_campaign(path: str | Path) -> CampaignSpec:
     if not isinstance(doc, Mapping):
         raise CampaignError(f'{file}: a campaign is a YAML mapping')
     return parse_campaign(doc, source=str(file), folder=file.parent)
+
+
+def load_hold(path: str | Path) -> HoldCriterion:
+    """The hold criterion of a campaign file, or of a *hold file*: a mapping of ``name``
+    (default: the file's stem), ``angle_unit`` and ``hold`` only (the bounds then
+    name any allocator mode and gain set). :class:`CampaignError` on any problem."""
+    file = Path(path)
+    if not file.is_file():
+        raise CampaignError(f'hold criterion file not found: {file}')
+    try:
+        doc = yaml.safe_load(file.read_text(encoding='utf-8'))
+    except (yaml.YAMLError, UnicodeDecodeError) as exc:
+        raise CampaignError(f'{file}: not valid YAML: {" ".join(str(exc).split())}') from exc
+    if not isinstance(doc, Mapping):
+        raise CampaignError(f'{file}: a hold criterion is a YAML mapping')
+    if not set(doc) <= _HOLD_KEYS:
+        spec = parse_campaign(doc, source=str(file), folder=file.parent)
+        return HoldCriterion(spec.name, spec.hold)
+    parser = _Parser(str(file), file.parent)
+    name, parser.scale = parser.identity(doc)
+    if 'hold' not in doc:
+        raise parser.fail('hold', 'missing (a list of bounds on metrics.json)')
+    return HoldCriterion(name, parser.hold(doc['hold'], None))
 
 
 def parse_campaign(doc: Mapping[str, Any], *, source: str | None = None,
@@ -155,15 +181,19 @@ class _Parser:
 
     # ---- sections
 
-    def campaign(self, doc: Mapping[str, Any]) -> CampaignSpec:
-        doc = self.mapping(doc, 'top level', _TOP_KEYS)
+    def identity(self, doc: Mapping[str, Any]) -> tuple[str, float]:
+        """The file's ``name`` and its angle unit's scale to rad."""
         name = doc.get('name', Path(self.source).stem)
         if not isinstance(name, str) or not _NAME.match(name):
             raise self.fail('name', f'got {name!r}; allowed: letters, digits, _')
         unit = doc.get('angle_unit', 'rad')
         if unit not in ('rad', 'deg'):
             raise self.fail('angle_unit', f"must be 'rad' or 'deg', got {unit!r}")
-        self.scale = math.pi / 180.0 if unit == 'deg' else 1.0
+        return name, math.pi / 180.0 if unit == 'deg' else 1.0
+
+    def campaign(self, doc: Mapping[str, Any]) -> CampaignSpec:
+        doc = self.mapping(doc, 'top level', _TOP_KEYS)
+        name, self.scale = self.identity(doc)
         seed = doc.get('seed')
         if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
             raise self.fail('seed', f'got {seed!r}; allowed: an integer >= 0 (required)')
@@ -378,7 +408,10 @@ class _Parser:
                     tuple(names), robot))
         return tuple(out)
 
-    def hold(self, value: Any, configurations: tuple[Configuration, ...]) -> tuple[Bound, ...]:
+    def hold(self, value: Any, configurations: tuple[Configuration, ...] | None
+             ) -> tuple[Bound, ...]:
+        """The bounds; their ``allocators`` and ``gains`` among the configurations' (any
+        allocator mode and gain set name without configurations: a hold file)."""
         template = metrics_template()
         out = []
         for i, entry in enumerate(self.sequence(value if value is not None else [], 'hold')):
@@ -387,20 +420,23 @@ class _Parser:
                 raise self.fail(where, f'expected a mapping, got {entry!r}')
             metric = entry.get('metric')
             shape = template.get(metric) if isinstance(metric, str) else None
-            numeric = [k for k, v in template.items() if k != 'run'
+            numeric = [k for k, v in template.items() if k not in ('run', 'hold')
                        and (isinstance(v, Mapping) or not isinstance(v, (str, bool)))]
             if metric not in numeric:
                 raise self.fail(f'{where}.metric', f'got {metric!r}; allowed: the keys of '
                                                    f'metrics.json: {", ".join(numeric)}')
-            select = {'controllers': list(CONTROLLER_KINDS),
-                      'allocators': [c.allocator for c in configurations],
-                      'gains': [c.gains for c in configurations]}
+            select: dict[str, list[str] | None] = {
+                'controllers': list(CONTROLLER_KINDS),
+                'allocators': (list(ALLOCATOR_MODES) if configurations is None
+                               else [c.allocator for c in configurations]),
+                'gains': None if configurations is None else [c.gains for c in configurations]}
             keys = (set(shape) | ({'position', 'angle'} if set(shape) == set(DOF_NAMES)
                                   else set()) | {'max'}) if isinstance(shape, Mapping) \
                 else {'max'}
             doc = self.mapping(entry, where, {'metric'} | set(select) | keys)
             limits = self.limits(doc, keys, shape, str(metric), where)
-            chosen = {k: self.names(doc[k], f'{where}.{k}', sorted(set(v)))
+            chosen = {k: self.names(doc[k], f'{where}.{k}', None if v is None
+                                    else sorted(set(v)))
                       if k in doc else () for k, v in select.items()}
             out.append(Bound(str(metric), limits, chosen['controllers'],
                              chosen['allocators'], chosen['gains']))

@@ -14,7 +14,9 @@ from typing import Any
 
 import numpy as np
 
+from tiltrov_ros.core.bounds import Bound, violations
 from tiltrov_ros.core.errors import CampaignError
+from tiltrov_ros.core.hold import HOLD_TEMPLATE
 from tiltrov_ros.core.metrics import compute_metrics
 from tiltrov_ros.core.runlog import CONTROL_FIELDS, PLANT_FIELDS, RunLog
 
@@ -118,37 +120,6 @@ class Configuration:
 
 
 @dataclass(frozen=True)
-class Bound:
-    """``metric[key] <= limit`` for every (key, limit) (key '' for a scalar metric), on
-    the runs of the configurations it names (empty: all)."""
-
-    metric: str
-    limits: tuple[tuple[str, float], ...]
-    controllers: tuple[str, ...] = ()
-    allocators: tuple[str, ...] = ()
-    gains: tuple[str, ...] = ()
-
-    def applies(self, config: Configuration) -> bool:
-        return ((not self.controllers or config.controller in self.controllers)
-                and (not self.allocators or config.allocator in self.allocators)
-                and (not self.gains or config.gains in self.gains))
-
-    def violations(self, metrics: Mapping[str, Any]) -> list[str]:
-        out = []
-        for key, limit in self.limits:
-            value = metrics.get(self.metric)
-            name = self.metric
-            if key:
-                value = value.get(key) if isinstance(value, Mapping) else None
-                name = f'{self.metric}.{key}'
-            if not isinstance(value, (int, float)) or isinstance(value, bool):
-                out.append(f'{name} is null')
-            elif not value <= limit:
-                out.append(f'{name} {value:.4g} > {limit:.4g}')
-        return out
-
-
-@dataclass(frozen=True)
 class CampaignSpec:
     """A validated campaign file (:func:`~tiltrov_ros.core.campaign.load_campaign`)."""
 
@@ -194,39 +165,12 @@ class CampaignSpec:
         return violations(self.bounds(config), metrics)
 
 
-def violations(bounds: tuple[Bound, ...], metrics: Mapping[str, Any]) -> list[str]:
-    """The bounds ``metrics`` misses, one line each (empty: the run holds)."""
-    return [line for bound in bounds for line in bound.violations(metrics)]
-
-
-#: A run's verdict (docs/campaign.md, "Verdicts"): it holds; it does not, and...
-HELD = 'held'
-SERVO_RANGE = 'servo_range'     # ...the same run with servos turning all the way round holds
-PHYSICS = 'physics'             # ...no tilt on the full circle produces its steady wrench
-CONTROL = 'control'             # ...neither: the controller's or the allocator's doing
-VERDICTS = (HELD, SERVO_RANGE, PHYSICS, CONTROL)
-
-
-def verdict(holds: bool, metrics: Mapping[str, Any] | None,
-            counterfactual_holds: bool | None) -> str:
-    """The verdict of a run: ``held``; else ``servo_range`` when its counterfactual (the
-    same run, servos at +-180 deg; None: not run) holds; else ``physics`` when the
-    steady-wrench oracle finds no tilt on the full circle that produces the steady
-    wrench (``steady_shortfall_ratio_full_circle`` > 1); else ``control``."""
-    if holds:
-        return HELD
-    if counterfactual_holds:
-        return SERVO_RANGE
-    ratio = (metrics or {}).get('steady_shortfall_ratio_full_circle')
-    if isinstance(ratio, (int, float)) and ratio > 1.0:
-        return PHYSICS
-    return CONTROL
-
-
 @cache
 def metrics_template() -> Mapping[str, Any]:
     """The keys and nesting of ``metrics.json`` (values of a run without ticks): what a
     hold bound may name and what the campaign table's metric columns are."""
     empty: dict[str, Any] = {name: np.zeros((0, n) if n else 0) for name, n in
                              {**PLANT_FIELDS, **CONTROL_FIELDS}.items()}
-    return compute_metrics(RunLog(**empty))
+    template = compute_metrics(RunLog(**empty))
+    template['hold'] = dict(HOLD_TEMPLATE)      # null without ticks: its keys, for tables
+    return template
