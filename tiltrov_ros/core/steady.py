@@ -157,10 +157,21 @@ def judge(robot: RobotParams, wrench: ArrayLike, weights: Sequence[float] = DEFA
     return Oracle(robot, weights, fraction).judge(wrench)
 
 
-def from_meta(meta: Mapping[str, Any], quaternion: ArrayLike) -> SteadyVerdict | None:
-    """The verdict for a run's final setpoint attitude from its meta (``robot``,
-    ``disturbances``, ``allocator_weights``: :meth:`~tiltrov_ros.core.runner.StackConfig.
-    describe`); None when the meta lacks them or the lasting external wrench is unknown."""
+@dataclass(frozen=True)
+class RunSetting:
+    """What a run's meta says the oracles need: the robot with its true center of mass,
+    the disturbances, and the allocator's weights."""
+
+    robot: RobotParams
+    disturbances: Mapping[str, Any]
+    external: tuple[float, ...]
+    weights: tuple[float, ...]
+
+
+def run_setting(meta: Mapping[str, Any]) -> RunSetting | None:
+    """The :class:`RunSetting` of a run's meta (``robot``, ``disturbances``,
+    ``allocator_weights``: :meth:`~tiltrov_ros.core.runner.StackConfig.describe`); None
+    when the meta lacks them or the lasting external wrench is unknown."""
     robot_doc, dist = meta.get('robot'), meta.get('disturbances')
     if not isinstance(robot_doc, Mapping) or not isinstance(dist, Mapping):
         return None
@@ -170,10 +181,23 @@ def from_meta(meta: Mapping[str, Any], quaternion: ArrayLike) -> SteadyVerdict |
     try:
         nominal = RobotParams.from_mapping(robot_doc)
         r_g = tuple(g + e for g, e in zip(nominal.center_of_gravity, dist['com_error']))
-        robot = replace(nominal, center_of_gravity=r_g)
         weights = meta.get('allocator_weights') or DEFAULT_WEIGHTS
-        tau = steady_wrench(robot, quaternion, dist['current'], external)
-        return judge(robot, tau, tuple(float(w) for w in weights))
+        return RunSetting(replace(nominal, center_of_gravity=r_g), dist,
+                          tuple(float(v) for v in external), tuple(float(w) for w in weights))
+    except (TypeError, ValueError, KeyError):     # ParameterError is a ValueError
+        return None
+
+
+def from_meta(meta: Mapping[str, Any], quaternion: ArrayLike) -> SteadyVerdict | None:
+    """The verdict for a run's final setpoint attitude from its meta (:func:`run_setting`);
+    None when the meta lacks what it needs."""
+    setting = run_setting(meta)
+    if setting is None:
+        return None
+    try:
+        tau = steady_wrench(setting.robot, quaternion, setting.disturbances['current'],
+                            setting.external)
+        return judge(setting.robot, tau, setting.weights)
     except (TypeError, ValueError, KeyError):     # ParameterError is a ValueError
         return None
 

@@ -82,7 +82,7 @@ from a run's meta). numpy only.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 import itertools
 import math
 from typing import Any
@@ -100,7 +100,7 @@ from tiltrov_ros.core.allocation.closed_form import solve_batch
 from tiltrov_ros.core.allocation.decomposition import Geometry
 from tiltrov_ros.core.allocation.thrusts import TiltProblem
 from tiltrov_ros.core.params import RobotParams
-from tiltrov_ros.core.steady import steady_wrench
+from tiltrov_ros.core.steady import run_setting, steady_wrench
 from tiltrov_ros.core.thrust_map import thrust_wrench
 
 FloatArray = NDArray[np.float64]
@@ -540,24 +540,17 @@ def wander_reach(robot: RobotParams, quaternion: ArrayLike, current: ArrayLike,
 
 def from_meta(meta: Mapping[str, Any], quaternion: ArrayLike,
               limits: tuple[float, float] | None = None) -> Reach | None:
-    """:func:`wander_reach` for a run's final setpoint attitude from its meta (``robot``,
-    ``disturbances``, ``allocator_weights``: :meth:`~tiltrov_ros.core.runner.StackConfig.
-    describe`); None when the meta lacks them or the lasting external wrench is
-    unknown."""
-    robot_doc, dist = meta.get('robot'), meta.get('disturbances')
-    if not isinstance(robot_doc, Mapping) or not isinstance(dist, Mapping):
+    """:func:`wander_reach` for a run's final setpoint attitude from its meta
+    (:func:`~tiltrov_ros.core.steady.run_setting`); None when the meta lacks what it
+    needs."""
+    setting = run_setting(meta)
+    if setting is None:
         return None
-    external = dist.get('external_wrench_lasting')
-    if not isinstance(external, Sequence) or isinstance(external, str):
-        return None
+    dist = setting.disturbances
     try:
-        nominal = RobotParams.from_mapping(robot_doc)
-        r_g = tuple(g + e for g, e in zip(nominal.center_of_gravity, dist['com_error']))
-        robot = replace(nominal, center_of_gravity=r_g)
-        weights = meta.get('allocator_weights') or DEFAULT_WEIGHTS
-        return wander_reach(robot, quaternion, dist['current'],
+        return wander_reach(setting.robot, quaternion, dist['current'],
                             dist.get('current_std', (0.0, 0.0, 0.0)),
                             dist.get('current_time_constant', (60.0, 60.0, 60.0)),
-                            external, tuple(float(w) for w in weights), limits=limits)
+                            setting.external, setting.weights, limits=limits)
     except (TypeError, ValueError, KeyError):     # ParameterError is a ValueError
         return None
