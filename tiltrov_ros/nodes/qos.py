@@ -41,10 +41,11 @@ CLOCK_READER_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
                               durability=DurabilityPolicy.VOLATILE,
                               history=HistoryPolicy.KEEP_LAST, depth=100)
 #: The plant's per-step topics (``/clock``, ``joint_states``, ``odom``, ``/tf``): as
-#: :data:`PUBLISHER_QOS`, ten times deeper. Lockstep publishes them thousands of times per
-#: wall second, so 1000 samples were a third of a second of a recorder's lag; 10000 are
-#: 100 s of sim time, as deep as the recorder's own queues (Fast DDS frees what every
-#: reader acknowledged: a reader that keeps up costs no memory).
+#: :data:`PUBLISHER_QOS`, ten times deeper. In a recorded lockstep run no depth decides
+#: what is kept: the recorder paces the plant (``recorder_window``, 1 s of sim time: 100
+#: steps), far inside it; in realtime a recorder behind by more than the depth loses
+#: samples, and says so. Fast DDS frees what every reader acknowledged: a reader that
+#: keeps up costs no memory.
 STATE_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
                        durability=DurabilityPolicy.VOLATILE,
                        history=HistoryPolicy.KEEP_LAST, depth=10000)
