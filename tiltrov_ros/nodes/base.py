@@ -54,6 +54,7 @@ from .parameters import (
     parameter_source,
 )
 from .qos import RELIABLE_QOS
+from .responses import HeldResponses
 from .serialized import SerializedTemplate
 from .simclock import install as install_time_source
 
@@ -196,6 +197,8 @@ class TiltrovNode(InputGuard, Node):
         apply_command_line_order(self, self._source_args, keep=[p.name for p in overrides])
         for line in misdirected_sections(self._source_args, self.get_fully_qualified_name()):
             self.get_logger().warning(line)
+        #: Its parameter services' responses reach a requester matched late (responses.py).
+        self.responses = HeldResponses(self)
         self.callback_errors = 0
         self.final_sent = False
         self.steady = steady_clock()
