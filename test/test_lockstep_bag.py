@@ -10,6 +10,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 import json
 import math
 from pathlib import Path
@@ -26,10 +27,12 @@ from tiltrov_ros.analysis.reallocate import compare, read_control
 from tiltrov_ros.bag.bagfile import iter_raw
 from tiltrov_ros.bag.cdr import leading_stamp_ns
 from tiltrov_ros.bag.reader import read_runlog
+from tiltrov_ros.cli.replay import REPLAY_NODE
 from tiltrov_ros.core import jit
 from tiltrov_ros.core.metrics import metric_differences
 from tiltrov_ros.core.names import ALLOCATOR
 from tiltrov_ros.core.timebase import to_ns
+from tiltrov_ros.nodes.handshake import Handshake
 from tiltrov_ros.stack.specs import LaunchOptions, stack_specs
 from tiltrov_ros.stack.supervisor import executable
 
@@ -156,8 +159,11 @@ def test_offline_allocator_reproduces_the_lockstep_recording(
 def test_replayed_wrench_cmd_drives_the_allocator_like_the_live_stack(
         ros: Any, lockstep_bags: dict[str, Path], tmp_path: Path) -> None:
     """The allocator runs as ``tiltrov launch`` runs it (own process, same parameter
-    files and overrides); the replay is ``tiltrov replay BAG --topics wrench_cmd
-    --by-stamp`` (at the stamps' pace: a lockstep bag's log times bunch up)."""
+    files and overrides), in a run with the player and the probe; the replay is
+    ``tiltrov replay BAG --topics wrench_cmd --by-stamp --join ...`` (at the stamps'
+    pace: a lockstep bag's log times bunch up; its first message once the player, the
+    allocator and the probe have matched each other from both sides: before that, a
+    loaded machine lost the first wrenches or their answers)."""
     bag = lockstep_bags['pd']
     control = read_control(bag)
     offline = compare(control)          # the --through allocator re-run
@@ -171,22 +177,23 @@ def test_replayed_wrench_cmd_drives_the_allocator_like_the_live_stack(
     probe = Probe(probe_node, ['thrust_cmd', 'tilt_cmd', 'wrench_achieved'])
     specs, _, _ = stack_specs(LaunchOptions(scenario=SCENARIO, controller='pd',
                                                      duration=float(DURATION)))
+    run = [ALLOCATOR, REPLAY_NODE, 'replay_probe']
     spec = next(s for s in specs if s.name == ALLOCATOR)
+    spec = replace(spec, overrides={**spec.overrides, 'run_nodes': run})
+    Handshake(probe_node, run).start()
     allocator = subprocess.Popen(executable(spec)
                                  + spec.ros_args(spec.write_overrides(tmp_path)),
                                  stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     player = None
     try:
-        # The probe's readers matched with the allocator's writers, not only discovered
-        # (a fixed half second was too short under load: the first answers went by).
-        assert ros.spin_until(probe.matched, timeout=60.0), 'the allocator did not come up'
         player = subprocess.Popen(
             [sys.executable, '-m', 'tiltrov_ros.cli', 'replay', str(bag), '--topics',
-             'wrench_cmd', '--by-stamp', '--wait-for-subscribers', '30'],
+             'wrench_cmd', '--by-stamp', '--join', f'{ALLOCATOR},replay_probe'],
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         assert ros.spin_until(lambda: player.poll() is not None
                               and all(len(probe[t]) >= len(replayed) for t in probe.messages),
-                              timeout=60.0), sorted(set(replayed) - set(probe.stamps('thrust_cmd')))
+                              timeout=120.0), sorted(set(replayed)
+                                                     - set(probe.stamps('thrust_cmd')))
         ros.spin_for(0.2)               # nothing more comes
         output = player.communicate(timeout=10)[0]
     finally:

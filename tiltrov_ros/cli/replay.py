@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 from tiltrov_ros.bag.bagfile import bag_info
 from tiltrov_ros.bag.replay import Player, ReplayOptions, parse_remaps
@@ -25,6 +26,8 @@ from .output import print_written, report_errors
 #: ``--through``: the parts of the stack a bag can be replayed through offline.
 THROUGH = ('allocator',)
 THROUGH_OUT = 'runs/replay'
+#: The player's node name (a run that it joins names it among its run_nodes).
+REPLAY_NODE = 'tiltrov_replay'
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -48,6 +51,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--wait-for-subscribers', type=float, default=1.0, metavar='SEC',
                         help='wait up to SEC until every topic has a subscriber and every '
                              'subscriber seen has matched the player (default 1; 0: no wait)')
+    parser.add_argument('--join', default='', metavar='NODE[,NODE...]',
+                        help="take part in the handshake of a run of these nodes (their "
+                             "run_nodes name tiltrov_replay too): publish the first message "
+                             "once every node of the run has matched every other, seen from "
+                             "both sides (docs/nodes.md), so that none is lost")
     offline = parser.add_argument_group(
         'offline (no ROS)', 'replay through a part of the stack in this process instead')
     offline.add_argument('--through', choices=THROUGH, default=None,
@@ -73,7 +81,8 @@ def _through(args: argparse.Namespace) -> int:
             '--remap': bool(args.remap), '--clock': args.clock,
             '--clock-hz': args.clock_hz != 100.0, '--loop': args.loop,
             '--by-stamp': args.by_stamp,
-            '--wait-for-subscribers': args.wait_for_subscribers != 1.0}
+            '--wait-for-subscribers': args.wait_for_subscribers != 1.0,
+            '--join': bool(args.join)}
     out = args.out if args.out is not None else Path(THROUGH_OUT)
 
     def task() -> int:
@@ -116,11 +125,13 @@ def run(args: argparse.Namespace) -> int:
         print(f'tiltrov replay: {exc}')
         return 1
     rclpy.init()
-    node = rclpy.create_node('tiltrov_replay')
+    node = rclpy.create_node(REPLAY_NODE)
     player: Player | None = None
     try:
         player = Player(args.bag, node, options)
-        player.run()
+        others = [n for n in (part.strip() for part in args.join.split(',')) if n]
+        if not others or join_run(node, others):
+            player.run()
     except BagError as exc:
         print(f'tiltrov replay: {exc}')
         return 1
@@ -134,3 +145,30 @@ def run(args: argparse.Namespace) -> int:
     print(f'published {total} messages: ' + ', '.join(
         f'{name} {count}' for name, count in sorted(counts.items())))
     return 0
+
+
+def join_run(node: Any, others: list[str]) -> bool:
+    """Take part in the handshake of a run of ``others`` and ``node`` (nodes/handshake.py)
+    until the run is ready: True; False when stopped first (Ctrl-C). Says what it waits for
+    whenever that changes."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    from tiltrov_ros.nodes.handshake import Handshake
+
+    handshake = Handshake(node, [node.get_name(), *others])
+    executor = SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
+    handshake.start()
+    said = None
+    try:
+        while rclpy.ok(context=node.context) and not handshake.run_ready():
+            waiting = handshake.run_waiting_for()
+            if waiting != said:
+                print(f'tiltrov replay: waiting for the run: {waiting}', flush=True)
+                said = waiting
+            executor.spin_once(timeout_sec=0.05)
+    finally:
+        executor.remove_node(node)
+        executor.shutdown()
+    return handshake.run_ready()
