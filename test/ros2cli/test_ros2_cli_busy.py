@@ -31,7 +31,14 @@ def _plain(ros2: Ros2, *args: str) -> subprocess.CompletedProcess[str]:
                                           timeout=120))
 
 
+#: s: this test's bound against a hang: 13 commands, each a new Python process that
+#: imports rclpy and discovers the graph (10-15 s apiece beside two busy loops: 116-200 s
+#: in all, over the suite's 180 s), each command bounded on its own (120 s).
+BOUND = 13 * 120
+
+
 @pytest.mark.slow
+@pytest.mark.timeout(BOUND)
 def test_node_list_param_get_and_set_answer_on_a_busy_recorded_run(
         ros: Any, ros2: Ros2, tmp_path: Path) -> None:
     proc = ros2.start(['ros2', 'launch', 'tiltrov_ros', 'tiltrov.launch.py',
