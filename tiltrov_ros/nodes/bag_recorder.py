@@ -367,6 +367,8 @@ class BagRecorder(RecorderRun, TiltrovNode):
         self.get_logger().warning(f'{topic.name}: DDS lost {info.total_count_change} '
                                   f'message(s) ({info.total_count} in total)',
                                   throttle_duration_sec=_THROTTLE)
+        if self._finals:
+            self._confirm_finals()
 
     def _flush(self) -> None:
         try:

@@ -124,14 +124,15 @@ class RecorderRun:
             self._finals[name] = (values.get('instance', ''), published)
 
     def _confirm_finals(self: BagRecorder) -> None:
-        """Confirm each final report whose counted messages are all taken (what is
-        queued on every topic is taken first; a message taken and not written is a
-        write error, which the bag and the exit code report)."""
+        """Confirm each final report whose counted messages are all accounted for: taken
+        (what is queued on every topic is taken first; a message taken and not written is
+        a write error) or reported lost by DDS (it will never come: a node that waited
+        for it would wait for ever). Both are in the bag's report and the exit code."""
         for topic in list(self._topics.values()):
             self._drain(topic, limit=self._queue_limit)
-        taken = {t.name: t.received for t in self._topics.values() if t.record}
+        accounted = {t.name: t.received + t.lost for t in self._topics.values() if t.record}
         done = [name for name, (_, published) in self._finals.items()
-                if all(taken.get(topic, 0) >= n for topic, n in published.items())]
+                if all(accounted.get(topic, 0) >= n for topic, n in published.items())]
         if not done:
             return
         for name in done:
