@@ -52,8 +52,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help='wait up to SEC until every topic has a subscriber and every '
                              'subscriber seen has matched the player (default 1; 0: no wait)')
     parser.add_argument('--join', default='', metavar='NODE[,NODE...]',
-                        help="take part in the handshake of a run of these nodes (their "
-                             "run_nodes name tiltrov_replay too): publish the first message "
+                        help=f"take part in the handshake of a run of these nodes (their "
+                             f"run_nodes name {REPLAY_NODE} too): publish the first message "
                              "once every node of the run has matched every other, seen from "
                              "both sides (docs/nodes.md), so that none is lost")
     offline = parser.add_argument_group(
