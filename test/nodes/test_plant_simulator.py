@@ -248,6 +248,8 @@ def test_parameters_scenario_overrides_and_defaults(ros) -> None:
     ({'control_period': 0.055}, 'control_period'),
     ({'com_error': [0.1, 0.0]}, 'com_error'),
     ({'robot.length': -0.6}, 'robot.length'),
+    ({'recorder_window': 49.9}, 'recorder_window'),
+    ({'recorder_window': 10.0, 'markers_period': 0.01}, 'recorder_window'),
 ])
 def test_invalid_parameters_name_themselves(ros, overrides, name) -> None:
     with pytest.raises((ParameterError, ParameterException)) as info:
@@ -395,3 +397,18 @@ def test_the_per_step_topics_keep_seconds_of_a_readers_lag(ros) -> None:
     for topic in topics:
         assert depths[node.resolve_topic_name(topic)] == 10000, topic
     assert depths[node.resolve_topic_name('robot_markers')] == 1000
+
+
+def test_a_paced_window_fits_every_recorded_writers_history() -> None:
+    """What a recorder_window lets the plant run ahead of the bag (plus a control period)
+    fits the shallowest recorded history: steps, ticks, markers; the default window does
+    with room, the longest allowed one with two samples to spare."""
+    from tiltrov_ros.nodes.qos import (
+        HANDOFF_QOS, PUBLISHER_QOS, STATE_QOS, paced_window_limit_ns)
+    step, period, markers = 10_000_000, 50_000_000, 100_000_000
+    limit = paced_window_limit_ns(step, period, markers)
+    assert limit == 49_850_000_000
+    assert (limit + period) // step + 2 <= STATE_QOS.depth
+    assert (limit + period) // period + 2 <= min(PUBLISHER_QOS.depth, HANDOFF_QOS.depth)
+    assert paced_window_limit_ns(step, period, step) < paced_window_limit_ns(step, period, 0)
+    assert paced_window_limit_ns(step, 10 * STATE_QOS.depth * step, 0) == 0

@@ -14,10 +14,11 @@ from tiltrov_ros.core.params import RobotParams
 from tiltrov_ros.core.paramtable import Param, ParamTable
 from tiltrov_ros.core.plant import Plant
 from tiltrov_ros.core.scenarios import InitialState, Scenario, ThrusterFault, load_scenario
-from tiltrov_ros.core.timebase import to_ns
+from tiltrov_ros.core.timebase import seconds, to_ns
 from tiltrov_ros.core.visual import Scales
 
 from .parameters import check, declare, declare_failed_thrusters, declare_robot
+from .qos import paced_window_limit_ns
 
 if TYPE_CHECKING:
     from .base import TiltrovNode
@@ -52,7 +53,9 @@ PLANT_PARAMS = ParamTable('plant_simulator', [
     Param('recorder_window', 'float', 1.0, 'lockstep with the bag recorder among run_nodes: '
           'the plant steps past a control tick only while it is at most this far ahead of '
           'what the recorder has written of /clock and the tick topics (0: every tick waits '
-          'until its commands are written)', 's', low=0.0, high=3600.0, read_only=True),
+          'until its commands are written); at most what the writers keep (49.85 s with the '
+          'default step, control and markers periods)', 's', low=0.0, high=3600.0,
+          read_only=True),
     Param('command_timeout', 'float', 0.5, 'realtime: sim seconds without a thrust_cmd after '
           'which the thrusters are commanded to zero (tilts held) until commands return; '
           '0: off', 's', low=0.0, high=3600.0),
@@ -139,6 +142,14 @@ def declare_parameters(node: TiltrovNode) -> PlantConfig:
         if ns % step_ns:
             raise ParameterError(name, f'got {v[name]!r} s; allowed: 0 or a whole number of '
                                  f'steps ({v["step_size"]!r} s)')
+    window_ns = to_ns(v['recorder_window'])
+    window_limit = paced_window_limit_ns(step_ns, period_ns, markers_ns)
+    if window_ns > window_limit:
+        raise ParameterError('recorder_window', f'got {v["recorder_window"]!r} s; allowed: at '
+                             f'most {seconds(window_limit):g} s with step_size '
+                             f'{v["step_size"]!r} s, control_period {period!r} s and '
+                             f'markers_period {v["markers_period"]!r} s (what the writers '
+                             f'keep for a recorder that far behind)')
     return PlantConfig(
         mode=v['mode'], real_time_factor=v['real_time_factor'], step_ns=step_ns,
         control_period_ns=period_ns,
@@ -147,7 +158,7 @@ def declare_parameters(node: TiltrovNode) -> PlantConfig:
         initial_state=scenario.initial_state if scenario is not None else InitialState(),
         scenario=v['scenario'], duration_ns=duration_ns, exit_at_end=v['exit_at_end'],
         stall_timeout=v['stall_timeout'], startup_subscribers=v['startup_subscribers'],
-        recorder_window_ns=to_ns(v['recorder_window']), command_timeout=v['command_timeout'],
+        recorder_window_ns=window_ns, command_timeout=v['command_timeout'],
         respawn_hold=v['respawn_hold'],
         markers_period_ns=markers_ns, marker_scales=Scales(*v['marker_scales']),
         tf=v['tf'], tf_thrusters=v['tf_thrusters'],

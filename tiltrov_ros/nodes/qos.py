@@ -64,13 +64,32 @@ PROGRESS_QOS = LATCHED_QOS
 HANDSHAKE_READER_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
                                   durability=DurabilityPolicy.TRANSIENT_LOCAL,
                                   history=HistoryPolicy.KEEP_LAST, depth=100)
-#: The restart handoff (nodes/handoff.py): reliable, transient local, the last few
-#: answers (a standby that starts after the node still gets the state in force).
+#: The restart handoff (nodes/handoff.py): reliable, transient local (a standby that
+#: starts after the node still gets the state in force), as deep as :data:`PUBLISHER_QOS`:
+#: the bag records it, and a paced recorder may be ``recorder_window`` of ticks behind
+#: (10 deep lost a sample of ``tilt_target`` with the recorder stopped for a 1 s window of
+#: 20 ticks).
 HANDOFF_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL,
-                         history=HistoryPolicy.KEEP_LAST, depth=10)
+                         history=HistoryPolicy.KEEP_LAST, depth=PUBLISHER_QOS.depth)
 #: Readers that only want the latest sample (realtime odometry).
 SENSOR_QOS = qos_profile_sensor_data
+
+
+def paced_window_limit_ns(step_ns: int, period_ns: int, markers_ns: int) -> int:
+    """The longest ``recorder_window`` whose samples every recorded writer keeps.
+
+    A paced plant runs at most the window plus a control period ahead of what the
+    recorder has written; a KEEP_LAST writer drops its oldest sample once its history is
+    full, acknowledged or not. So what a window lets by must fit the shallowest history:
+    steps (:data:`STATE_QOS`), ticks (:data:`PUBLISHER_QOS`, :data:`HANDOFF_QOS`),
+    markers (:data:`PUBLISHER_QOS`), two samples to spare.
+    """
+    limits = [(STATE_QOS.depth - 2) * step_ns - period_ns,
+              (min(PUBLISHER_QOS.depth, HANDOFF_QOS.depth) - 2) * period_ns - period_ns]
+    if markers_ns:
+        limits.append((PUBLISHER_QOS.depth - 2) * markers_ns - period_ns)
+    return max(0, min(limits))
 
 
 def reader_qos(mode: str) -> QoSProfile:
