@@ -403,8 +403,7 @@ def test_a_paced_window_fits_every_recorded_writers_history() -> None:
     """What a recorder_window lets the plant run ahead of the bag (plus a control period)
     fits the shallowest recorded history: steps, ticks, markers; the default window does
     with room, the longest allowed one with two samples to spare."""
-    from tiltrov_ros.nodes.qos import (
-        HANDOFF_QOS, PUBLISHER_QOS, STATE_QOS, paced_window_limit_ns)
+    from tiltrov_ros.nodes.qos import HANDOFF_QOS, PUBLISHER_QOS, STATE_QOS, paced_window_limit_ns
     step, period, markers = 10_000_000, 50_000_000, 100_000_000
     limit = paced_window_limit_ns(step, period, markers)
     assert limit == 49_850_000_000
