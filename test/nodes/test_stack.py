@@ -94,8 +94,9 @@ def test_lockstep_odometry_equals_the_headless_run(ros, scenario: str, controlle
         assert run.node(CONTROLLER).controller.switches >= 2
     else:
         assert run.probe['tilt_request'] == []
-    # The handshake started the run with every match made: nothing stalled, nothing sent twice.
-    assert run.extra['stalls'] == 0
+    # The handshake started the run with every match made: nothing sent twice. (A stall is
+    # a wait longer than stall_timeout in wall seconds, a report: a run starved by a loaded
+    # machine has some, 1 of 2 x 1.1 s beside two busy loops and a campaign.)
     assert run.extra['republished'] == 0
 
 

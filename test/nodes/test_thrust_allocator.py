@@ -460,3 +460,22 @@ def test_measured_tilts_from_joint_states_are_the_starting_point(rig) -> None:
     assert (commanded.tilt_front, commanded.tilt_rear) != got[1]
     assert alloc.measured_late == 1
     assert alloc.diagnostic_status()[2]['tilt_source'] == 'measured'
+
+
+def test_every_wrench_sent_while_the_allocator_was_busy_is_answered_in_order(rig) -> None:
+    """30 wrenches stored by DDS while the allocator's callbacks do not run (a node slowed
+    at its start, a replay at the stamps' pace): each is answered, in order. Its reader
+    keeps all: a 10-deep one answered the last 10 and dropped the rest unannounced."""
+    from rclpy.duration import Duration
+
+    ros, _, probe, pub = rig
+    _allocator(ros)
+    assert ros.spin_until(lambda: pub.get_subscription_count() > 0)
+    stamps = [k * TICK for k in range(30)]
+    for ns in stamps:
+        pub.publish(wrench(ns, W1 if ns % (2 * TICK) else W2))
+    # Stored on the allocator's side (acknowledged) before a callback of it ran.
+    assert pub.wait_for_all_acked(Duration(seconds=60))
+    assert ros.spin_until(_answered(probe, len(stamps)))
+    for topic in ('thrust_cmd', 'tilt_cmd', 'wrench_achieved'):
+        assert [stamp_ns(m.header.stamp) for m in _answers(probe, topic)] == stamps, topic

@@ -27,6 +27,14 @@ from tiltrov_ros.core.names import LOCKSTEP
 RELIABLE_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
                           durability=DurabilityPolicy.VOLATILE,
                           history=HistoryPolicy.KEEP_LAST, depth=10)
+#: Inputs a node answers one by one (the allocator's ``wrench_cmd`` and ``tilt_request``):
+#: reliable, KEEP_ALL. A KEEP_LAST reader overwrites its oldest sample, unannounced, when
+#: the node falls that many behind (a replay at the stamps' pace into an allocator slowed
+#: at its start lost the second wrench from a 10-deep queue); a KEEP_ALL reader refuses
+#: a sample it has no room for, so the writer keeps it and sends it again.
+ANSWERED_READER_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
+                                 durability=DurabilityPolicy.VOLATILE,
+                                 history=HistoryPolicy.KEEP_ALL)
 #: The stack's publishers: reliable, with a history deep enough that a sample a
 #: slow reader (the bag recorder on a loaded machine) has not acknowledged yet is
 #: still there to be resent: a KEEP_LAST writer drops its oldest sample when the

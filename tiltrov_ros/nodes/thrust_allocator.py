@@ -77,7 +77,7 @@ from .executors import main_loop
 from .guard import THROTTLE, input_callback
 from .handoff import HANDOFF_QOS, Handoff, tilt_target_message
 from .parameters import Overrides
-from .qos import PUBLISHER_QOS, RELIABLE_QOS
+from .qos import ANSWERED_READER_QOS, PUBLISHER_QOS, RELIABLE_QOS
 from .tilt_request import TiltRequests, keep_bounded
 from .watchdog import InputWatchdog
 
@@ -121,10 +121,11 @@ class ThrustAllocatorNode(AllocatorParameters, AllocatorSafety, TiltRequests, Ti
         self._achieved_pub.serialize_as(*wrench_template())
         self._tilt_pub.serialize_as(*joint_template(TILTS, 'position'))
         self._thrust_pub.serialize_as(*joint_template(THRUSTERS, 'effort'))
-        self.create_input_subscription(WrenchStamped, WRENCH_CMD, self._on_wrench, RELIABLE_QOS)
+        self.create_input_subscription(WrenchStamped, WRENCH_CMD, self._on_wrench,
+                                       ANSWERED_READER_QOS)
         if self.tilt_request_mode != 'ignored':
             self.create_input_subscription(JointState, TILT_REQUEST, self._on_tilt_request,
-                                           RELIABLE_QOS)
+                                           ANSWERED_READER_QOS)
             self.create_timer(WATCHDOG_PERIOD, self._watchdog, clock=self.steady)
         #: tilt_source measured: joint_states tilts by stamp; the last received; wrenches
         #: that started from an earlier measurement than their own stamp, or from none.
