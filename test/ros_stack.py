@@ -318,11 +318,16 @@ class LaunchProcess:
     def pids(self) -> dict[str, int]:
         return {name: node['pid'] for name, node in self.status().get('nodes', {}).items()}
 
-    def wait_running(self, timeout: float = 60.0) -> dict[str, int]:
-        """The nodes' pids once every node is started (state ``running``)."""
-        deadline = time.monotonic() + timeout
+    def wait_running(self, idle: float = 120.0) -> dict[str, int]:
+        """The nodes' pids once every node is started (state ``running``); a launch that
+        says nothing new for ``idle`` wall seconds meanwhile is hung (a loaded machine
+        starts the nodes slowly: 80 s once beside two busy loops and another stack)."""
+        seen, since = len(self.output), time.monotonic()
         while self.status().get('state') != 'running':
-            assert time.monotonic() < deadline and self.process.poll() is None, self.output
+            assert self.process.poll() is None, self.output
+            if len(self.output) != seen:
+                seen, since = len(self.output), time.monotonic()
+            assert time.monotonic() - since < idle, self.output
             time.sleep(0.05)
         return self.pids()
 
@@ -376,6 +381,11 @@ def assert_same_run(recorded: Any, expected: Any, atol: float = 1e-9) -> None:
     for name in RUN_SERIES:
         np.testing.assert_allclose(getattr(recorded, name), getattr(expected, name),
                                    rtol=0, atol=atol, err_msg=name)
+
+
+#: pytest-timeout of a test whose waits give up on a hang (``spin_while_progressing``), not
+#: on a slow machine: only a hang that its own waits missed reaches it.
+HANG_BOUND = 1200
 
 
 class SimTime:

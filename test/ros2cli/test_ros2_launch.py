@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 import pytest
 from ros2_cli import Ros2, ctrl_c, doc_commands, wait_nodes
-from ros_stack import SimTime, assert_same_run
+from ros_stack import HANG_BOUND, SimTime, assert_same_run
 
 from tiltrov_ros.core.runner import run_scenario, stack_config
 
@@ -74,6 +74,7 @@ def test_ctrl_c_ends_a_launch_cleanly(ros: Any, ros2: Ros2, tmp_path: Path) -> N
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(HANG_BOUND)
 def test_respawned_nodes_are_taken_over_bit_for_bit(ros: Any, ros2: Ros2,
                                                      tmp_path: Path) -> None:
     """``respawn:=wrench_controller,thrust_allocator`` in a recorded 120 s lockstep pid run:
@@ -89,14 +90,21 @@ def test_respawned_nodes_are_taken_over_bit_for_bit(ros: Any, ros2: Ros2,
                        'duration:=120', 'record:=bag',
                        'respawn:=wrench_controller,thrust_allocator'], tmp_path, log)
     sim = SimTime(ros.node('sim_time_probe'))
+
+    def progress() -> tuple[int, int]:       # sim time, or the launch saying something
+        return sim.ns, log.stat().st_size
+
     try:
         for victim, at in zip(('wrench_controller', 'thrust_allocator'), kill_at):
-            assert ros.spin_until(lambda at=at: sim.reached(at), timeout=120.0), log.read_text()
+            assert ros.spin_while_progressing(lambda at=at: sim.reached(at), progress), \
+                log.read_text()
             # The first process of the executable is the node (its standby starts after).
             pid = int(re.search(rf'\[{victim}-\d+\]: process started with pid \[(\d+)\]',
                                 log.read_text())[1])
             os.kill(pid, signal.SIGKILL)
-        assert proc.wait(timeout=240) == 0, log.read_text()[-5000:]
+        assert ros.spin_while_progressing(lambda: proc.poll() is not None, progress), \
+            log.read_text()[-5000:]
+        assert proc.returncode == 0, log.read_text()[-5000:]
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from ros_stack import MS, NS, SimTime, assert_same_run
+from ros_stack import HANG_BOUND, MS, NS, SimTime, assert_same_run
 from ros_stack import LaunchProcess as _Launch
 from ros_stack import alive as _alive
 from ros_stack import ready as _ready
@@ -137,6 +137,7 @@ def test_a_recorded_run_starts_on_the_handshake_with_one_message_per_step_and_ti
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(HANG_BOUND)
 @pytest.mark.parametrize(('victims', 'seed'), [(('thrust_allocator',), 3),
                                                (('wrench_controller', 'thrust_allocator'), 11)])
 def test_killed_nodes_are_taken_over_bit_for_bit(ros: Any, tmp_path: Path,
@@ -161,10 +162,16 @@ def test_killed_nodes_are_taken_over_bit_for_bit(ros: Any, tmp_path: Path,
     sim = SimTime(ros.node('sim_time_probe'))
     try:
         launch.wait_running()
+        def progress() -> tuple[int, int]:   # sim time, or the launch saying something
+            return sim.ns, len(launch.output)
+
         for victim, at in zip(victims, kill_at):
-            assert ros.spin_until(lambda at=at: sim.reached(at), timeout=120.0), launch.output
+            assert ros.spin_while_progressing(lambda at=at: sim.reached(at), progress), \
+                launch.output
             os.kill(launch.pids()[victim], signal.SIGKILL)
-        assert launch.finish(timeout=180) == 0, launch.output
+        assert ros.spin_while_progressing(lambda: launch.process.poll() is not None,
+                                          progress), launch.output
+        assert launch.finish(timeout=60) == 0, launch.output
     finally:
         launch.cleanup()
     out = launch.output
