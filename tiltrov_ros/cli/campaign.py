@@ -254,7 +254,11 @@ def _run(args: argparse.Namespace) -> int:
                 with _sigterm_interrupts():
                     _execute(args, spec, samples, todo, table, len(tasks))
             except KeyboardInterrupt:
-                done = sum(t.run_id in table.done for t in tasks)
+                # What the file holds, as --resume will read it: the interrupt may have
+                # come between a row's write and its count (the row then went out here).
+                table.close()
+                in_file = {row['run_id'] for row in read_table(table.path)[1]}
+                done = sum(t.run_id in in_file for t in tasks)
                 print(f'tiltrov campaign: interrupted; {done} of {len(tasks)} runs are in '
                       f'{table.path}; the same command with --resume finishes the campaign',
                       file=sys.stderr)
