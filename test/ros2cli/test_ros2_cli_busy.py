@@ -3,8 +3,8 @@ full speed (every process busy, the recorder pacing the plant), ``ros2 node list
 every node, the recorder included, and ``ros2 param get`` and ``ros2 param set`` on each
 answer with the command line's own defaults (its daemon, its timeouts), each once: no
 retry (``node list`` is asked until the daemon has discovered every node: the test's
-probe seeing them does not mean the daemon has). (The nodes announce themselves every 0.1 s, config/fastdds.xml: a command line
-started later finds them within its window.)"""
+probe seeing them does not mean the daemon has). (The nodes announce themselves every
+0.1 s, config/fastdds.xml: a command line started later finds them within its window.)"""
 
 from __future__ import annotations
 
