@@ -20,10 +20,10 @@ from rclpy.context import Context
 from rclpy.duration import Duration
 from rclpy.exceptions import InvalidParameterValueException
 from rclpy.parameter import Parameter
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
 from ros_stack import installed
-from rosbags.interfaces import QosReliability
+from rosbags.interfaces import QosDurability, QosReliability
 from rosbags.rosbag2 import Reader
 from rosgraph_msgs.msg import Clock
 from stack_messages import (
@@ -149,6 +149,27 @@ def test_log_time_is_sim_time_with_clock_handled_before_data(ros: Any, tmp_path:
             log[conn.topic].append((log_time, data))
     assert [t for t, _ in log['/clock']] == [cdr_stamp_ns(d) for _, d in log['/clock']]
     assert [t for t, _ in log['/odom']] == [(1000 + i) * 10_000_000 for i in steps]
+
+
+def test_the_urdf_is_recorded_without_waiting_for_discovery(ros: Any, tmp_path: Path) -> None:
+    """robot_description (transient local, written once at start) is read from the
+    recorder's start like /tf_static, not found by polling: a short run may end before a
+    poll (none here after start-up within the wait: the period is the longest allowed)."""
+    bag = tmp_path / 'urdf'
+    recorder = ros.add(BagRecorder(context=ros.context, parameter_overrides={
+        'output': str(bag), 'discovery_period': 60.0}))
+    plant = ros.node('plant')
+    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    plant.create_publisher(String, 'robot_description', latched).publish(String(data='<robot/>'))
+    assert ros.spin_until(lambda: recorder.stats().received.get('/robot_description') == 1,
+                          timeout=30.0)
+    recorder.close()
+    with Reader(bag) as reader:
+        (conn,) = [c for c in reader.connections if c.topic == '/robot_description']
+        assert conn.msgcount == 1
+        assert [q.durability for q in conn.ext.offered_qos_profiles] == [
+            QosDurability.TRANSIENT_LOCAL]
 
 
 def test_parameters_from_the_shipped_file_and_their_limits(ros: Any, tmp_path: Path) -> None:

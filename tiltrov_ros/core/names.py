@@ -117,6 +117,10 @@ TF_TOPICS: dict[str, str] = {TF: 'tf2_msgs/msg/TFMessage', TF_STATIC: 'tf2_msgs/
 TF_REMAPPINGS = ((TF, TF.lstrip('/')), (TF_STATIC, TF_STATIC.lstrip('/')))
 #: The URDF as robot_state_publisher publishes it (std_msgs/String, transient local).
 ROBOT_DESCRIPTION = 'robot_description'
+#: Topics written once for every reader (transient local) that a bag holds from the run's
+#: start: topic -> type (the tree's static relations and the URDF).
+LATCHED_TOPICS: dict[str, str] = {TF_STATIC: TF_TOPICS[TF_STATIC],
+                                  ROBOT_DESCRIPTION: 'std_msgs/msg/String'}
 
 # --------------------------------------------------------------------------- nodes
 

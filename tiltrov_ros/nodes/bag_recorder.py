@@ -13,7 +13,8 @@ Design points:
 * The stack's topics (:data:`~tiltrov_ros.core.names.STACK_TOPICS`) and the
   transform tree's (``/tf``, and ``/tf_static`` transient local, as rosbag2
   records it: a static transform published before the recorder started is
-  recorded too; when tf2_msgs is importable) are subscribed at start-up, before
+  recorded too; when tf2_msgs is importable) and ``robot_description`` (transient
+  local) are subscribed at start-up, before
   their publishers exist, so the first message of a run is recorded; other
   topics are found by polling the graph every ``discovery_period`` seconds.
 * Log time follows the node's clock. Without ``use_sim_time`` it is the time
@@ -67,9 +68,9 @@ from tiltrov_ros.core.names import (
     CLOCK,
     HANDOFF_TOPICS,
     HANDSHAKE_TOPICS,
+    LATCHED_TOPICS,
     RECORDER,
     STACK_TOPICS,
-    TF_STATIC,
     TF_TOPICS,
 )
 from tiltrov_ros.core.timebase import cdr_stamp
@@ -170,11 +171,14 @@ class BagRecorder(RecorderRun, TiltrovNode):
                 # The restart handoff is transient local: read so from the start (adapting
                 # the reader to its writer mid-run would lose what came meanwhile).
                 self._subscribe(name, msgtype, [], latched=relative in HANDOFF_TOPICS)
-        for relative, msgtype in TF_TOPICS.items():
+        # The tree, and what is written once (transient local), read so from the start: a
+        # latched topic found by polling may come after a short run has ended, and the
+        # handshake then has the recorder wait for its writer's match like any other.
+        for relative, msgtype in {**TF_TOPICS, **LATCHED_TOPICS}.items():
             name = self.resolve_topic_name(relative)
             if self._in_scope(name) and _importable(msgtype):
                 message_definition(msgtype)
-                self._subscribe(name, msgtype, [], latched=relative == TF_STATIC)
+                self._subscribe(name, msgtype, [], latched=relative in LATCHED_TOPICS)
         if self._use_sim_time and self._clock_topic is None:
             self._subscribe(CLOCK, STACK_TOPICS[CLOCK], [], record=False)
 
