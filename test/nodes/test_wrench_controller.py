@@ -11,6 +11,7 @@ from nav_msgs.msg import Odometry
 import numpy as np
 import pytest
 from rclpy.parameter import Parameter
+from rclpy.serialization import serialize_message
 from ros_stack import (
     KEEP_ALL,
     MS,
@@ -28,8 +29,10 @@ from rosgraph_msgs.msg import Clock
 from tiltrov_ros.core.controllers import Reference, load_controller_config, make_controller
 from tiltrov_ros.core.errors import ParameterError
 from tiltrov_ros.core.kinematics import quat_from_euler
+from tiltrov_ros.core.names import PID_INTEGRAL
 from tiltrov_ros.core.params import load_robot_params
 from tiltrov_ros.nodes.conversions import stamp_ns
+from tiltrov_ros.nodes.handoff import Handoff, pid_integral_message
 from tiltrov_ros.nodes.wrench_controller import WrenchController
 from tiltrov_ros.paths import config_file
 
@@ -195,6 +198,40 @@ def test_realtime_uses_the_latest_setpoint_and_zero_wrench_without_one(rig) -> N
     _, expected = _expected('pd', t=0.15)
     np.testing.assert_array_equal(wrench_rows(probe['wrench_cmd'])[1], expected.wrench)
     assert probe.stamps('wrench_cmd') == [0, 3 * TICK]
+
+
+def test_a_respawned_realtime_controller_is_silent_until_its_setpoint_then_resumes(
+        rig) -> None:
+    """A realtime controller built from a standby's handoff publishes no zero wrench
+    before its first setpoint (that would command zero thrust while the plant and the
+    allocator hold its predecessor's last one), then resumes the predecessor's integral."""
+    ros, probe, send, ready = rig
+    integral = [0.01, -0.02, 0.03, 0.0, 0.05, -0.01]
+    gains = load_controller_config().with_kind('pid').gains
+    handoff = Handoff()
+    handoff.keep(PID_INTEGRAL, serialize_message(
+        pid_integral_message(17 * NS_, integral, gains.ki)))
+    node = ros.add(WrenchController(context=ros.context, handoff=handoff,
+                                    parameter_overrides={'mode': 'realtime',
+                                                         'controller': 'pid'}))
+    assert ros.spin_until(ready)
+    send('odom', 18 * NS_)
+    assert ros.spin_until(lambda: node.no_setpoint == 1)
+    assert node.ticks == node.safe_answers == 0          # nothing was published
+    send('velocity', 18 * NS_)
+    send('setpoint', 18 * NS_)
+    assert ros.spin_until(lambda: node._latest_setpoint is not None
+                          and node._latest_velocity is not None)
+    send('odom', 18 * NS_ + TICK)
+    assert ros.spin_until(lambda: len(probe['wrench_cmd']) == 1)
+    assert probe.stamps('wrench_cmd') == [18 * NS_ + TICK]
+    assert node.resumed_from == 17 * NS_
+    controller = make_controller(load_controller_config().with_kind('pid'), load_robot_params())
+    controller.resume(17.0, np.array(integral))
+    reference = Reference(np.array(SETPOINT[0]), np.array(SETPOINT[1]), np.array(VELOCITY))
+    expected = controller.update(18.05, np.array(POSITION), np.array(QUATERNION), np.array(NU),
+                                 reference)
+    np.testing.assert_array_equal(wrench_rows(probe['wrench_cmd'])[0], expected.wrench)
 
 
 def test_setpoint_in_another_frame_is_rejected(rig) -> None:

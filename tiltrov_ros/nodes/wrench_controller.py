@@ -278,6 +278,15 @@ class WrenchController(ControllerParameters, ControllerWaits, AchievedInput, Til
             if self._latest_setpoint is None:
                 self._tick = None
                 self.no_setpoint += 1
+                if self.handoff is not None:
+                    # A respawned controller before its first setpoint: a zero wrench
+                    # would be a command (zero thrust); silent, it leaves the
+                    # predecessor's last one held (respawn_hold).
+                    self.get_logger().warning(
+                        'respawned: no setpoint received yet: publishing nothing, the '
+                        "predecessor's last wrench holds meanwhile (respawn_hold)",
+                        throttle_duration_sec=THROTTLE)
+                    return
                 self.get_logger().warning('no setpoint received yet: publishing a zero wrench',
                                           throttle_duration_sec=THROTTLE)
                 self._publish_safe(ns)
