@@ -285,7 +285,7 @@ def restarts(tries: int, lockstep_kills: int, busy: int, seed: int = 2026) -> di
                             'attitude_deg': float(np.degrees(errors[1])),
                             'within_bound': bool(errors[0] <= base[0] + 0.05 and np.degrees(
                                 errors[1]) <= np.degrees(base[1]) + 3.0),
-                            'takeovers': log.count('ready again')})
+                            'takeovers': log.count(': taking over (')})
                     rows[label] = {'without_kills': {'position_m': base[0],
                                                      'attitude_deg': float(np.degrees(base[1]))},
                                    'with_kills': tries_out}
