@@ -51,18 +51,8 @@ class RosHarness:
     def spin_while_progressing(self, predicate: Callable[[], bool],
                                progress: Callable[[], object], idle: float = 120.0,
                                step: float = 0.01) -> bool:
-        """Spin until ``predicate()`` is true, for as long as ``progress()`` keeps changing:
-        give up once it has not changed for ``idle`` wall seconds (a hang, however slow
-        the machine; a loaded one takes longer, never too long). Returns as spin_until."""
-        seen, since = progress(), time.monotonic()
-        while not predicate():
-            now = progress()
-            if now != seen:
-                seen, since = now, time.monotonic()
-            elif time.monotonic() - since > idle:
-                return bool(predicate())
-            self.executor.spin_once(timeout_sec=step)
-        return True
+        """:func:`spin_while_progressing` on this harness's executor."""
+        return spin_while_progressing(self.executor, predicate, progress, idle, step)
 
     def spin_for(self, seconds: float, step: float = 0.01) -> None:
         """Spin for a fixed wall-clock duration (to let late messages arrive)."""
@@ -76,3 +66,21 @@ class RosHarness:
             node.destroy_node()
         self.nodes.clear()
         self._rclpy.try_shutdown(context=self.context)
+
+
+def spin_while_progressing(executor: Any, predicate: Callable[[], bool],
+                           progress: Callable[[], object], idle: float = 120.0,
+                           step: float = 0.01) -> bool:
+    """Spin ``executor`` until ``predicate()`` is true, for as long as ``progress()`` keeps
+    changing: give up once it has not changed for ``idle`` wall seconds (a hang, however
+    slow the machine; a loaded one takes longer, never too long). Returns the last value
+    of the predicate, so tests ``assert`` on it."""
+    seen, since = progress(), time.monotonic()
+    while not predicate():
+        now = progress()
+        if now != seen:
+            seen, since = now, time.monotonic()
+        elif time.monotonic() - since > idle:
+            return bool(predicate())
+        executor.spin_once(timeout_sec=step)
+    return True

@@ -19,6 +19,7 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
+from harness import spin_while_progressing
 from nav_msgs.msg import Odometry
 import numpy as np
 import pytest
@@ -208,14 +209,15 @@ STACK_TOPICS = tuple(t for t in names.STACK_TOPICS
 
 
 def run_stack(context: Any, executor: Any, options: LaunchOptions, *,
-              topics: Sequence[str] = STACK_TOPICS, timeout: float = 60.0,
+              topics: Sequence[str] = STACK_TOPICS, idle: float = 120.0,
               namespace: str = '', last: Callable[[Probe, int], bool] | None = None
               ) -> StackRun:
     """Build the launcher's nodes in ``context``, spin ``executor`` until the plant ends.
 
     The caller owns ``executor``; the nodes and the probe node are removed from
     it and destroyed before returning (the messages stay in the probe), once the
-    last ``odom`` (and ``last(probe, end_ns)``, if given) reached the probe.
+    last ``odom`` (and ``last(probe, end_ns)``, if given) reached the probe. ``idle``:
+    wall seconds without progress that make a hang (no bound on a slow run).
     """
     import rclpy
 
@@ -229,12 +231,16 @@ def run_stack(context: Any, executor: Any, options: LaunchOptions, *,
         for node in (probe_node, *nodes):
             executor.add_node(node)
         plant = run.node(PLANT)
-        assert spin(executor, plant.finished.done, timeout), (
+        # While the plant's time moves, however slowly: ``idle`` s without a step (or
+        # before the first: the handshake) is a hang.
+        assert spin_while_progressing(
+            executor, plant.finished.done, lambda: plant.plant.time_ns, idle=idle), (
             f'the plant stopped at {plant.plant.time_ns / NS} s of {duration} s')
         # The last messages: the state at the end reaches the probe.
         end = plant.plant.time_ns
-        spin(executor, lambda: ('odom' not in topics or (probe.stamps('odom') or [0])[-1] >= end)
-             and (last is None or last(probe, end)), 5.0)
+        assert spin(executor, lambda: (
+            'odom' not in topics or (probe.stamps('odom') or [0])[-1] >= end)
+            and (last is None or last(probe, end)), idle), 'the end never reached the probe'
         run.extra['stalls'] = plant.stalls
         run.extra['republished'] = plant.republished
     finally:
