@@ -8,8 +8,10 @@ probe seeing them does not mean the daemon has). (The nodes announce themselves 
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 import subprocess
+import time
 from typing import Any
 
 import pytest
@@ -25,11 +27,20 @@ SETTABLE = {'plant_simulator': ('stall_timeout', '1.0'),
             'reference_publisher': ('max_catch_up', '100')}
 
 
+#: Each command run, its wall time and the load then: a failure shows them (a command
+#: that timed out waiting for a node's services, and how loaded the machine was).
+RUNS: list[str] = []
+
+
 def _plain(ros2: Ros2, *args: str) -> subprocess.CompletedProcess[str]:
     """``ros2 args...`` exactly as typed: the command line's defaults, one attempt."""
-    return without_dds_log(subprocess.run([ros2.exe, *args], cwd=ros2.workspace.root,
+    started = time.monotonic()
+    done = without_dds_log(subprocess.run([ros2.exe, *args], cwd=ros2.workspace.root,
                                           env=ros2.env, capture_output=True, text=True,
                                           timeout=120))
+    RUNS.append(f'{" ".join(args[:3])}: exit {done.returncode} in '
+                f'{time.monotonic() - started:.1f} s, load {os.getloadavg()[0]:.1f}')
+    return done
 
 
 #: s: this test's bound against a hang: 13 commands (and node list until the daemon has
@@ -75,7 +86,7 @@ def test_node_list_param_get_and_set_answer_on_a_busy_recorded_run(
         print(f'ros2 node list: every node in listing {listings}')
         for node in NODES:
             got = _plain(ros2, 'param', 'get', f'/{node}', 'use_sim_time')
-            assert got.returncode == 0 and 'Boolean value is:' in got.stdout, (node, got)
+            assert got.returncode == 0 and 'Boolean value is:' in got.stdout, (node, got, RUNS)
         got = _plain(ros2, 'param', 'get', '/bag_recorder', 'run_info')
         assert got.returncode == 0, got
         run_info = got.stdout.split('String value is: ', 1)[1].strip()
@@ -83,7 +94,7 @@ def test_node_list_param_get_and_set_answer_on_a_busy_recorded_run(
         sets = {**SETTABLE, 'bag_recorder': ('run_info', quoted)}
         for node, (name, value) in sets.items():
             done = _plain(ros2, 'param', 'set', f'/{node}', name, value)
-            assert done.stdout.strip() == 'Set parameter successful', (node, done)
+            assert done.stdout.strip() == 'Set parameter successful', (node, done, RUNS)
         assert proc.poll() is None, (tmp_path / 'launch.log').read_text()[-3000:]
     finally:
         _plain(ros2, 'daemon', 'stop')
