@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 import pytest
 from ros2_cli import Ros2, ctrl_c, doc_commands, overrides, wait_nodes
+from ros_stack import HANG_BOUND
 import yaml
 
 from tiltrov_ros.core.names import STACK_TOPICS
@@ -47,6 +48,9 @@ def _node_commands() -> dict[str, list[str]]:
 
 
 @pytest.mark.slow
+# A hang bound, not a speed limit: about forty ros2 commands, each a new Python process
+# bounded on its own (ATTEMPT_TIMEOUT), took over the suite's 180 s beside two busy loops.
+@pytest.mark.timeout(HANG_BOUND)
 def test_ros2_run_every_node_as_documented(ros: Any, ros2: Ros2, tmp_path: Path) -> None:
     commands = _node_commands()
     source = ros2.workspace.source       # the documented config/ paths are the package's
@@ -123,7 +127,7 @@ def test_ros2_run_every_node_as_documented(ros: Any, ros2: Ros2, tmp_path: Path)
 
     # ros2 topic: the stack's topics, and a message echoed.
     stack = {name if name.startswith('/') else f'/{name}' for name in STACK_TOPICS}
-    deadline = time.monotonic() + 60
+    deadline = time.monotonic() + 600       # only against a hang
     while True:         # until its discovery (--spin-time) has seen every topic
         topics = ros2.run('topic', 'list', '--spin-time', '2')
         assert topics.returncode == 0, topics.stderr
