@@ -207,10 +207,10 @@ def test_a_respawned_realtime_controller_is_silent_until_its_setpoint_then_resum
     allocator hold its predecessor's last one), then resumes the predecessor's integral."""
     ros, probe, send, ready = rig
     integral = [0.01, -0.02, 0.03, 0.0, 0.05, -0.01]
-    gains = load_controller_config().with_kind('pid').gains
+    config = load_controller_config().with_kind('pid')
     handoff = Handoff()
     handoff.keep(PID_INTEGRAL, serialize_message(
-        pid_integral_message(17 * NS_, integral, gains.ki)))
+        pid_integral_message(17 * NS_, integral, config.gains.ki)))
     node = ros.add(WrenchController(context=ros.context, handoff=handoff,
                                     parameter_overrides={'mode': 'realtime',
                                                          'controller': 'pid'}))
@@ -226,7 +226,7 @@ def test_a_respawned_realtime_controller_is_silent_until_its_setpoint_then_resum
     assert ros.spin_until(lambda: len(probe['wrench_cmd']) == 1)
     assert probe.stamps('wrench_cmd') == [18 * NS_ + TICK]
     assert node.resumed_from == 17 * NS_
-    controller = make_controller(load_controller_config().with_kind('pid'), load_robot_params())
+    controller = make_controller(config, load_robot_params())
     controller.resume(17.0, np.array(integral))
     reference = Reference(np.array(SETPOINT[0]), np.array(SETPOINT[1]), np.array(VELOCITY))
     expected = controller.update(18.05, np.array(POSITION), np.array(QUATERNION), np.array(NU),
