@@ -187,7 +187,7 @@ def main_loop(factory: Callable[[], TiltrovNode], args: list[str] | None, name: 
     try:
         kwargs: dict[str, Any] = {}
         if standby:
-            handoff = stand_by(factory, name, args, stop, takeover)
+            handoff = stand_by(factory, name, context, stop, takeover)
             if handoff is None:
                 return 0
             if TOPICS.get(name):
@@ -239,36 +239,25 @@ def end_process(code: int) -> None:
     os._exit(code)
 
 
-def stand_by(factory: Any, name: str, args: list[str] | None, stop: threading.Event,
+def stand_by(factory: Any, name: str, context: Context, stop: threading.Event,
              takeover: threading.Event) -> Handoff | None:
     """A standby process: load the node's kernels, keep its predecessor's handoff
     (``<name>_standby``) until SIGUSR1 (return what it kept: the node is built next)
-    or a stop signal (None).
-
-    The standby's node lives in a context of its own (its own DDS participant), shut
-    down before the node is built: the node then starts on a participant of its own as
-    in any process, not on one whose earlier handshake reader other nodes had matched
-    (a reader made again in that participant once missed the other nodes' kept
-    handshake states, and the run waited for ever)."""
+    or a stop signal (None)."""
     from tiltrov_ros.core import jit
 
     jit.warmup(getattr(factory, 'kernel_groups', ()))
-    context = Context()
-    rclpy.init(args=args, context=context, signal_handler_options=SignalHandlerOptions.NO)
+    standby = Standby(name, context)
+    executor = make_executor(context)
+    executor.add_node(standby.node)
+    standby.node.get_logger().info(f'standing by for {name} (SIGUSR1: take over)')
     try:
-        standby = Standby(name, context)
-        executor = make_executor(context)
-        executor.add_node(standby.node)
-        standby.node.get_logger().info(f'standing by for {name} (SIGUSR1: take over)')
-        try:
-            done = Future()
-            while context.ok() and not stop.is_set() and not takeover.is_set():
-                executor.spin_until_future_complete(done, timeout_sec=STOP_POLL)
-        finally:
-            executor.shutdown()
-            standby.node.destroy_node()
+        done = Future()
+        while context.ok() and not stop.is_set() and not takeover.is_set():
+            executor.spin_until_future_complete(done, timeout_sec=STOP_POLL)
     finally:
-        context.try_shutdown()
+        executor.shutdown()
+        standby.node.destroy_node()
     if not takeover.is_set():
         return None
     print(f'{name}: taking over ({sum(len(v) for v in standby.handoff.kept.values())} '
