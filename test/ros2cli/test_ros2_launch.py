@@ -115,3 +115,48 @@ def test_respawned_nodes_are_taken_over_bit_for_bit(ros: Any, ros2: Ros2,
     assert missing_stamps(bag, 120 * 10**9, 10**7, 5 * 10**7) == {}
     assert_same_run(read_runlog(bag), run_scenario(stack_config('current_hold', 'pid'),
                                                    duration=120.0), atol=0.0)
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(HANG_BOUND)
+def test_nodes_killed_as_the_run_starts_are_taken_over_bit_for_bit(ros: Any, ros2: Ros2,
+                                                                   tmp_path: Path) -> None:
+    """The launch file's standbys are nodes of the run's handshake too: the controller
+    and the allocator killed (SIGKILL) at the first ticks of a recorded 10 s lockstep pid
+    run hand over their state (messages kept, nothing from zero), and the bag is the
+    headless run without kills to the last bit."""
+    from tiltrov_ros.bag.losses import missing_stamps
+    from tiltrov_ros.bag.reader import read_runlog
+
+    log = tmp_path / 'launch.log'
+    proc = ros2.start(['ros2', *LAUNCH, 'scenario:=current_hold', 'controller:=pid',
+                       'duration:=10', 'record:=bag',
+                       'respawn:=wrench_controller,thrust_allocator'], tmp_path, log)
+    sim = SimTime(ros.node('sim_time_probe'))
+
+    def progress() -> tuple[int, int]:
+        return sim.ns, log.stat().st_size
+
+    victims = ('wrench_controller', 'thrust_allocator')
+    try:
+        assert ros.spin_while_progressing(lambda: sim.reached(0.2), progress), \
+            log.read_text()
+        for victim in victims:
+            pid = int(re.search(rf'\[{victim}-\d+\]: process started with pid \[(\d+)\]',
+                                log.read_text())[1])
+            os.kill(pid, signal.SIGKILL)
+        assert ros.spin_while_progressing(lambda: proc.poll() is not None, progress), \
+            log.read_text()[-5000:]
+        assert proc.returncode == 0, log.read_text()[-5000:]
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    output = log.read_text()
+    for victim in victims:
+        kept = re.search(rf'{victim}: taking over \((\d+) handoff messages kept\)', output)
+        assert kept is not None and int(kept[1]) > 0, output[-5000:]
+    assert 'not bumpless' not in output and 'starts from zero' not in output
+    bag = tmp_path / 'bag'
+    assert missing_stamps(bag, 10 * 10**9, 10**7, 5 * 10**7) == {}
+    assert_same_run(read_runlog(bag), run_scenario(stack_config('current_hold', 'pid'),
+                                                   duration=10.0), atol=0.0)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+import re
 import signal
 import subprocess
 import sys
@@ -68,6 +69,24 @@ def test_a_node_dying_mid_run_stops_the_others(ros: Any, tmp_path: Path) -> None
         assert f'wrench_controller died (exit code {-signal.SIGKILL})' in out
         assert not any(_alive(pid) for pid in pids.values())
         assert launch.status()['state'] == 'ended' and launch.status()['exit_code'] == 1
+    finally:
+        launch.cleanup()
+
+
+@pytest.mark.slow
+def test_a_dying_standby_stops_the_launch(tmp_path: Path) -> None:
+    """A standby is a node of the run's handshake (the run waits for it): its death ends
+    the launch as a node's does, naming it, and every process stops."""
+    launch = _Launch(tmp_path, '--realtime', '--duration', '600',
+                     '--respawn', 'wrench_controller')
+    try:
+        pids = launch.wait_running()
+        assert set(pids) == {*NODES, 'wrench_controller_standby'}
+        os.kill(pids['wrench_controller_standby'], signal.SIGKILL)
+        assert launch.finish(timeout=60) == 1, launch.output
+        assert (f'wrench_controller_standby died (exit code {-signal.SIGKILL}); stopping '
+                'the other nodes') in launch.output
+        assert not any(_alive(pid) for pid in pids.values())
     finally:
         launch.cleanup()
 
@@ -179,6 +198,50 @@ def test_killed_nodes_are_taken_over_bit_for_bit(ros: Any, tmp_path: Path,
         assert f'{victim} died (exit code {-signal.SIGKILL}); its standby' in out, out
     assert out.count('every node of the run is ready again') == len(victims), out
     assert 'resumed from its predecessor' in out or 'resumed the pid' in out
+    assert 'not bumpless' not in out and 'starts from zero' not in out, out
+    assert missing_stamps(bag, int(duration * NS), 10 * MS, 50 * MS) == {}
+    assert_same_run(read_runlog(bag), run_scenario(stack_config('current_hold', 'pid'),
+                                                   duration=duration), atol=0.0)
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(HANG_BOUND)
+def test_nodes_killed_as_the_run_starts_are_taken_over_bit_for_bit(ros: Any,
+                                                                   tmp_path: Path) -> None:
+    """The standbys are nodes of the run's handshake: the run starts only once each one
+    has matched its node's handoff writers, so the controller and the allocator killed
+    at the run's first ticks (a recorded 10 s lockstep pid run with --respawn) still
+    hand over their state: each standby takes over with messages kept, nothing restarts
+    from zero, and the bag is the headless run without kills to the last bit."""
+    from tiltrov_ros.bag.losses import missing_stamps
+    from tiltrov_ros.bag.reader import read_runlog
+
+    bag = tmp_path / 'bag'
+    duration = 10.0
+    launch = _Launch(tmp_path, '--scenario', 'current_hold', '--controller', 'pid',
+                     '--duration', str(duration), '--record', str(bag),
+                     '--respawn', 'wrench_controller', '--respawn', 'thrust_allocator')
+    sim = SimTime(ros.node('sim_time_probe'))
+    try:
+        launch.wait_running()
+
+        def progress() -> tuple[int, int]:
+            return sim.ns, len(launch.output)
+
+        assert ros.spin_while_progressing(lambda: sim.reached(0.2), progress), launch.output
+        pids = launch.pids()
+        for victim in ('wrench_controller', 'thrust_allocator'):
+            os.kill(pids[victim], signal.SIGKILL)
+        assert ros.spin_while_progressing(lambda: launch.process.poll() is not None,
+                                          progress), launch.output
+        assert launch.finish(timeout=60) == 0, launch.output
+    finally:
+        launch.cleanup()
+    out = launch.output
+    for victim in ('wrench_controller', 'thrust_allocator'):
+        assert f'{victim} died (exit code {-signal.SIGKILL}); its standby' in out, out
+        kept = re.search(rf'{victim}: taking over \((\d+) handoff messages kept\)', out)
+        assert kept is not None and int(kept[1]) > 0, out
     assert 'not bumpless' not in out and 'starts from zero' not in out, out
     assert missing_stamps(bag, int(duration * NS), 10 * MS, 50 * MS) == {}
     assert_same_run(read_runlog(bag), run_scenario(stack_config('current_hold', 'pid'),

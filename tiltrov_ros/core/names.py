@@ -133,6 +133,14 @@ RECORDER = 'bag_recorder'
 #: Environment variable (value 1) that makes a node's process a standby: it keeps the
 #: node's restart handoff and builds the node on SIGUSR1 (nodes/handoff.py).
 STANDBY_ENV = 'TILTROV_STANDBY'
+
+
+def standby_name(node: str) -> str:
+    """The node name of ``node``'s standby until it takes over (a run node of its own
+    in a run with a respawn: the run starts once it keeps the handoff)."""
+    return f'{node}_standby'
+
+
 #: Every node of the package (a parameter file section naming none of them is reported).
 NODES = (PLANT, CONTROLLER, ALLOCATOR, REFERENCE, RECORDER)
 #: The stack's nodes: each reports what it published on /diagnostics, finally as it stops.

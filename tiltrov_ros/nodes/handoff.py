@@ -18,9 +18,12 @@ state after tick t - period (the predecessor may have answered t already: its st
 t is not the one to resume t from). What a killed process has not sent is lost with it,
 so the state is kept by a *standby*: the same executable started ahead (kernels loaded,
 rclpy up) as a node of its own name (``<node>_standby``, two nodes of one name confuse
-``ros2 param``), outside the run, reading the handoff topics. The launcher sends it
-SIGUSR1 when it sees the node's process exit; it then builds the real node with what it
-kept (:class:`Handoff`), which joins the run's handshake.
+``ros2 param``), reading the handoff topics. It is a node of the run's handshake (the
+launchers name it among ``run_nodes``): the run starts, and resumes after a takeover,
+only once it has matched the handoff's writers from both sides, so a node killed at
+once still leaves its state kept. The launcher sends it SIGUSR1 when it sees the node's
+process exit; it then builds the real node with what it kept (:class:`Handoff`), which
+joins the run's handshake under the node's name, and starts a new standby.
 """
 
 from __future__ import annotations
@@ -40,9 +43,13 @@ from tiltrov_ros.core.names import (
     TILT_TARGET,
     TILTS,
     WRENCH_CMD,
+    standby_name,
 )
 from tiltrov_ros.core.timebase import cdr_stamp_ns
 
+from .base import RUN
+from .handshake import Handshake
+from .parameters import declare
 from .qos import HANDOFF_QOS, RELIABLE_QOS
 
 if TYPE_CHECKING:
@@ -90,19 +97,22 @@ class Handoff:
 
 
 class Standby:
-    """The standby's node: reads the handoff topics of ``node`` and keeps them."""
+    """The standby's node: reads the handoff topics of ``node`` and keeps them, and joins
+    the run's handshake (``run_nodes``, as the node would) once it reads them."""
 
     def __init__(self, node_name: str, context: Any, namespace: str | None = None) -> None:
         import rclpy
 
         self.handoff = Handoff()
-        self.node: Node = rclpy.create_node(f'{node_name}_standby', context=context,
+        self.node: Node = rclpy.create_node(standby_name(node_name), context=context,
                                             namespace=namespace)
         for topic, msg_type in TOPICS.get(node_name, {}).items():
             qos = HANDOFF_QOS if topic in HANDOFF_TOPICS else RELIABLE_QOS
             self.node.create_subscription(msg_type, topic,
                                           functools.partial(self.handoff.keep, topic),
                                           qos, raw=True)
+        self.handshake = Handshake(self.node, declare(self.node, RUN)['run_nodes'])
+        self.handshake.start()
 
 
 def pid_integral_message(ns: int, integral: Sequence[float], ki: Sequence[float]) -> JointState:

@@ -58,6 +58,7 @@ from tiltrov_ros.core.names import (
     STANDBY_ENV,
     TF_REMAPPINGS,
     normalize_namespace,
+    standby_name,
 )
 from tiltrov_ros.core.robot_description import robot_urdf
 from tiltrov_ros.core.runner import StackConfig
@@ -239,7 +240,11 @@ class _EndOfRun:
 
     def exited(self, event: ProcessExited, context: LaunchContext) -> list[Any] | None:
         if id(event.action) not in self.names:      # a standby that never took over
-            return None
+            if context.is_shutdown or self.finished:
+                return None
+            # The run waits for it (a node of the handshake): its death ends the launch.
+            name = next((n for n, s in self.standbys.items() if s is event.action), '?')
+            raise LaunchError(f'{standby_name(name)} exited with code {event.returncode}')
         name = self.names[id(event.action)]
         self.running.discard(name)
         if context.is_shutdown:

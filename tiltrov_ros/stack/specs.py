@@ -10,6 +10,7 @@ of :func:`stack_specs`. ``--record DIR`` adds the ``bag_recorder`` node
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
+import copy
 from dataclasses import dataclass, field
 import json
 from pathlib import Path
@@ -30,6 +31,7 @@ from tiltrov_ros.core.names import (
     TF_REMAPPINGS,
     join_namespace,
     normalize_namespace,
+    standby_name,
 )
 from tiltrov_ros.core.params import robot_file
 from tiltrov_ros.core.runner import StackConfig, stack_config
@@ -112,15 +114,21 @@ class NodeSpec:
                                   f'({problem})') from None
         return values
 
-    def write_overrides(self, directory: Path, namespace: str = '') -> Path:
-        """A parameter file with the overrides, keyed by the node's full name.
+    def write_overrides(self, directory: Path, namespace: str = '', *,
+                        standby: bool = False) -> Path:
+        """A parameter file with the overrides, keyed by the node's full name (and, for
+        its ``standby``, the standby's too: it joins the run's handshake before it builds
+        the node).
 
         Not ``-p``: rcl stores ``-p`` values under ``/**`` and a node-specific
         section of a parameter file given earlier wins over them; a later file
         section for the node's own name wins over both.
         """
-        path = directory / f'{self.name}.overrides.yaml'
+        path = directory / f'{standby_name(self.name) if standby else self.name}.overrides.yaml'
         document = {f'{namespace}/{self.name}': {'ros__parameters': self.all_overrides()}}
+        if standby:     # a copy: YAML aliases are not read by rcl
+            document[f'{namespace}/{standby_name(self.name)}'] = copy.deepcopy(
+                document[f'{namespace}/{self.name}'])
         with path.open('w', encoding='utf-8') as stream:
             yaml.safe_dump(document, stream, sort_keys=False)
         return path
@@ -170,9 +178,12 @@ def resolve(options: LaunchOptions) -> tuple[StackConfig, float]:
 
 def run_node_names(options: LaunchOptions) -> list[str]:
     """The names of the run's nodes, as every node is told them (``run_nodes``): the
-    recorder with ``--record``, the four stack nodes, and those that ``--join``."""
+    recorder with ``--record``, the four stack nodes, the standby of each ``--respawn``
+    node (a kill right after the start finds its handoff kept), and those that
+    ``--join``."""
     return [*((RECORDER,) if options.record is not None else ()),
-            ALLOCATOR, CONTROLLER, REFERENCE, PLANT, *options.join]
+            ALLOCATOR, CONTROLLER, REFERENCE, PLANT,
+            *(standby_name(n) for n in options.respawn), *options.join]
 
 
 def stack_specs(options: LaunchOptions, *, config_dir: Path | None = None,

@@ -35,6 +35,7 @@ from tiltrov_ros.core.names import (
     PLANT,
     RECORDER,
     STANDBY_ENV,
+    standby_name,
 )
 
 from .specs import NodeSpec
@@ -193,10 +194,9 @@ class _Supervisor:
         """Start ``spec``'s node, or (``standby``) its standby: the same executable and
         arguments, which loads its kernels, keeps the node's handoff and takes over on
         SIGUSR1."""
-        argv = executable(spec) + spec.ros_args(spec.write_overrides(self.workdir,
-                                                                     self.namespace),
-                                                 self.namespace)
-        label = f'{spec.name}_standby' if standby else spec.name
+        overrides = spec.write_overrides(self.workdir, self.namespace, standby=standby)
+        argv = executable(spec) + spec.ros_args(overrides, self.namespace)
+        label = standby_name(spec.name) if standby else spec.name
         env = dict(self.env, **({STANDBY_ENV: '1'} if standby else {}))
         process = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                                    stderr=subprocess.STDOUT, env=env,
@@ -234,9 +234,9 @@ class _Supervisor:
     def report(self, state: str, code: int | None = None) -> None:
         nodes = {c.spec.name: {'pid': c.process.pid, 'starts': self.starts[c.spec.name],
                                'running': c.process.poll() is None} for c in self.children}
-        nodes.update({f'{name}_standby': {'pid': c.process.pid,
-                                          'starts': self.starts[f'{name}_standby'],
-                                          'running': c.process.poll() is None}
+        nodes.update({standby_name(name): {'pid': c.process.pid,
+                                           'starts': self.starts[standby_name(name)],
+                                           'running': c.process.poll() is None}
                       for name, c in self.standbys.items()})
         self.status.write(state, nodes, code)
 
@@ -262,6 +262,12 @@ class _Supervisor:
                 self.out.line('launch', f'{name} died (exit code {rc}); stopping the other '
                                         'nodes')
                 return EXIT_FAILED
+            for name, standby in self.standbys.items():
+                rc = standby.process.poll()
+                if rc is not None:      # the run waits for it (a node of its handshake)
+                    self.out.line('launch', f'{standby_name(name)} died (exit code {rc}); '
+                                            'stopping the other nodes')
+                    return EXIT_FAILED
             if self.monitor is not None:
                 self.monitor.poll(_pids(self.children))
             time.sleep(POLL)
@@ -322,6 +328,8 @@ def run_processes(specs: Sequence[NodeSpec], namespace: str, out: Output,
         if code == EXIT_FAILED:
             dead = [c.spec.name for c in supervisor.children
                     if c.process.returncode not in (0, None, -signal.SIGINT)]
+            dead += [standby_name(name) for name, c in supervisor.standbys.items()
+                     if c.process.returncode not in (0, None, -signal.SIGINT)]
             print(f'tiltrov launch: failed: {", ".join(dead) or "a node"} died', file=sys.stderr)
         recorder = next((c for c in supervisor.children if c.spec.name == RECORDER), None)
         if code == EXIT_OK and recorder is not None and recorder.process.returncode != 0:
