@@ -157,6 +157,8 @@ class Handshake:
         self.generation = 0
         self._ready_with: dict[str, str] | None = None
         self._published: NodeState | None = None
+        #: Instances of other run nodes this node has sent its state to once more.
+        self._answered: set[str] = set()
         self._pub: Any = None
         self._timer: Any = None
         self.started = False
@@ -233,6 +235,8 @@ class Handshake:
         if known is not None and _instance_time(state.instance) < _instance_time(known.instance):
             return          # an older process of that node, reported late
         self.states[state.name] = state
+        if not state.ready and state.instance not in self._answered:
+            self._answer(state.instance)
         if os.environ.get('TILTROV_HANDSHAKE_DEBUG') and known is None:
             self.node.get_logger().info(f'handshake: state of {state.name}; graph: '
                                         f'{sorted(self.node.get_node_names())}')
@@ -241,6 +245,15 @@ class Handshake:
             self.evaluate()
         else:
             self._changed()
+
+    def _answer(self, instance: str) -> None:
+        """Send this node's state once more, live, for a new instance of a run node that
+        is not ready: a reader made in a participant the others had long known once got
+        none of their kept (transient local) states and waited for ever, while states
+        published after its match reached it."""
+        self._answered.add(instance)
+        if self._published is not None:
+            self._pub.publish(self._published.to_message(self.node.get_fully_qualified_name()))
 
     def _poll(self) -> None:
         if not self.ready or self._endpoints_changed():
