@@ -408,3 +408,17 @@ class SimTime:
 
     def reached(self, seconds: float) -> bool:
         return self.ns >= seconds * NS
+
+
+def joined_sim_time(ros: Any, options: LaunchOptions, name: str = 'sim_time_probe') -> SimTime:
+    """A :class:`SimTime` probe that joins the run of ``options`` (whose ``join`` names
+    ``name``): the run starts only once the probe has matched it, so a short lockstep run
+    cannot end before the probe sees its first ticks."""
+    from tiltrov_ros.nodes.handshake import Handshake
+    from tiltrov_ros.stack.specs import run_node_names
+
+    assert name in options.join
+    node = ros.node(name)
+    sim = SimTime(node)
+    Handshake(node, run_node_names(options)).start()
+    return sim

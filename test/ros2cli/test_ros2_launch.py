@@ -12,9 +12,10 @@ from typing import Any
 import numpy as np
 import pytest
 from ros2_cli import Ros2, ctrl_c, doc_commands, wait_nodes
-from ros_stack import HANG_BOUND, SimTime, assert_same_run
+from ros_stack import HANG_BOUND, assert_same_run, joined_sim_time
 
 from tiltrov_ros.core.runner import run_scenario, stack_config
+from tiltrov_ros.stack.specs import LaunchOptions
 
 REPO = Path(__file__).resolve().parents[2]
 LAUNCH = ('launch', 'tiltrov_ros', 'tiltrov.launch.py')
@@ -75,27 +76,37 @@ def test_ctrl_c_ends_a_launch_cleanly(ros: Any, ros2: Ros2, tmp_path: Path) -> N
 
 @pytest.mark.slow
 @pytest.mark.timeout(HANG_BOUND)
-def test_respawned_nodes_are_taken_over_bit_for_bit(ros: Any, ros2: Ros2,
-                                                     tmp_path: Path) -> None:
-    """``respawn:=wrench_controller,thrust_allocator`` in a recorded 120 s lockstep pid run:
-    both killed (SIGKILL) at seeded random moments; each one's standby takes over, the
-    launch goes on (a respawned node's exit does not end it), ends with exit code 0, and
-    the bag is the headless run without kills to the last bit, every step and tick in it."""
+@pytest.mark.parametrize(('kill_at', 'duration'), [
+    (tuple(sorted(float(t) for t in np.random.default_rng(7).uniform(5.0, 100.0, 2))), 120),
+    # At the run's first ticks: the run started only once both standbys kept the handoff.
+    ((0.2, 0.2), 10),
+], ids=['seed7', 'first-ticks'])
+def test_respawned_nodes_are_taken_over_bit_for_bit(ros: Any, ros2: Ros2, tmp_path: Path,
+                                                     kill_at: tuple[float, float],
+                                                     duration: int) -> None:
+    """``respawn:=wrench_controller,thrust_allocator`` in a recorded lockstep pid run
+    (120 s, or 10 s): both killed (SIGKILL) at seeded random moments, or at the first
+    ticks; each one's standby (a node of the run's handshake) takes over with the state
+    handed over, the launch goes on (a respawned node's exit does not end it), ends with
+    exit code 0, and the bag is the headless run without kills to the last bit, every
+    step and tick in it."""
     from tiltrov_ros.bag.losses import missing_stamps
     from tiltrov_ros.bag.reader import read_runlog
 
-    kill_at = sorted(float(t) for t in np.random.default_rng(7).uniform(5.0, 100.0, 2))
+    victims = ('wrench_controller', 'thrust_allocator')
     log = tmp_path / 'launch.log'
+    # The probe joins the run: a short lockstep run does not end before it sees a tick.
+    sim = joined_sim_time(ros, LaunchOptions(record=tmp_path / 'bag', respawn=victims,
+                                             join=('restart_probe',)), 'restart_probe')
     proc = ros2.start(['ros2', *LAUNCH, 'scenario:=current_hold', 'controller:=pid',
-                       'duration:=120', 'record:=bag',
-                       'respawn:=wrench_controller,thrust_allocator'], tmp_path, log)
-    sim = SimTime(ros.node('sim_time_probe'))
+                       f'duration:={duration}', 'record:=bag',
+                       f'respawn:={",".join(victims)}', 'join:=restart_probe'], tmp_path, log)
 
     def progress() -> tuple[int, int]:       # sim time, or the launch saying something
         return sim.ns, log.stat().st_size
 
     try:
-        for victim, at in zip(('wrench_controller', 'thrust_allocator'), kill_at):
+        for victim, at in zip(victims, kill_at):
             assert ros.spin_while_progressing(lambda at=at: sim.reached(at), progress), \
                 log.read_text()
             # The first process of the executable is the node (its standby starts after).
@@ -109,54 +120,14 @@ def test_respawned_nodes_are_taken_over_bit_for_bit(ros: Any, ros2: Ros2,
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
     output = log.read_text()
-    assert output.count('every node of the run is ready again') == 2, output[-5000:]
-    assert 'not bumpless' not in output and 'starts from zero' not in output
-    bag = tmp_path / 'bag'
-    assert missing_stamps(bag, 120 * 10**9, 10**7, 5 * 10**7) == {}
-    assert_same_run(read_runlog(bag), run_scenario(stack_config('current_hold', 'pid'),
-                                                   duration=120.0), atol=0.0)
-
-
-@pytest.mark.slow
-@pytest.mark.timeout(HANG_BOUND)
-def test_nodes_killed_as_the_run_starts_are_taken_over_bit_for_bit(ros: Any, ros2: Ros2,
-                                                                   tmp_path: Path) -> None:
-    """The launch file's standbys are nodes of the run's handshake too: the controller
-    and the allocator killed (SIGKILL) at the first ticks of a recorded 10 s lockstep pid
-    run hand over their state (messages kept, nothing from zero), and the bag is the
-    headless run without kills to the last bit."""
-    from tiltrov_ros.bag.losses import missing_stamps
-    from tiltrov_ros.bag.reader import read_runlog
-
-    log = tmp_path / 'launch.log'
-    proc = ros2.start(['ros2', *LAUNCH, 'scenario:=current_hold', 'controller:=pid',
-                       'duration:=10', 'record:=bag',
-                       'respawn:=wrench_controller,thrust_allocator'], tmp_path, log)
-    sim = SimTime(ros.node('sim_time_probe'))
-
-    def progress() -> tuple[int, int]:
-        return sim.ns, log.stat().st_size
-
-    victims = ('wrench_controller', 'thrust_allocator')
-    try:
-        assert ros.spin_while_progressing(lambda: sim.reached(0.2), progress), \
-            log.read_text()
-        for victim in victims:
-            pid = int(re.search(rf'\[{victim}-\d+\]: process started with pid \[(\d+)\]',
-                                log.read_text())[1])
-            os.kill(pid, signal.SIGKILL)
-        assert ros.spin_while_progressing(lambda: proc.poll() is not None, progress), \
-            log.read_text()[-5000:]
-        assert proc.returncode == 0, log.read_text()[-5000:]
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-    output = log.read_text()
     for victim in victims:
         kept = re.search(rf'{victim}: taking over \((\d+) handoff messages kept\)', output)
         assert kept is not None and int(kept[1]) > 0, output[-5000:]
+    assert len(set(kill_at)) <= output.count('every node of the run is ready again') \
+        <= len(victims), output[-5000:]
     assert 'not bumpless' not in output and 'starts from zero' not in output
     bag = tmp_path / 'bag'
-    assert missing_stamps(bag, 10 * 10**9, 10**7, 5 * 10**7) == {}
+    assert missing_stamps(bag, duration * 10**9, 10**7, 5 * 10**7) == {}
     assert_same_run(read_runlog(bag), run_scenario(stack_config('current_hold', 'pid'),
-                                                   duration=10.0), atol=0.0)
+                                                   duration=float(duration)), atol=0.0)
+

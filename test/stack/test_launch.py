@@ -13,12 +13,13 @@ from typing import Any
 
 import numpy as np
 import pytest
-from ros_stack import HANG_BOUND, MS, NS, SimTime, assert_same_run
+from ros_stack import HANG_BOUND, MS, NS, assert_same_run, joined_sim_time
 from ros_stack import LaunchProcess as _Launch
 from ros_stack import alive as _alive
 from ros_stack import ready as _ready
 
 from tiltrov_ros.core.runner import run_scenario, stack_config
+from tiltrov_ros.stack.specs import LaunchOptions
 
 NODES = ('thrust_allocator', 'wrench_controller', 'reference_publisher', 'plant_simulator')
 
@@ -155,32 +156,46 @@ def test_a_recorded_run_starts_on_the_handshake_with_one_message_per_step_and_ti
     assert '/handshake' not in counts and '/recorder_progress' not in counts
 
 
+def _seeded_moments(seed: int, count: int) -> tuple[float, ...]:
+    """``count`` kill moments (s of sim time) drawn with ``seed`` over 5-100 s."""
+    return tuple(sorted(float(t) for t in np.random.default_rng(seed).uniform(5, 100, count)))
+
+
 @pytest.mark.slow
 @pytest.mark.timeout(HANG_BOUND)
-@pytest.mark.parametrize(('victims', 'seed'), [(('thrust_allocator',), 3),
-                                               (('wrench_controller', 'thrust_allocator'), 11)])
+@pytest.mark.parametrize(('victims', 'kill_at', 'duration'), [
+    (('thrust_allocator',), _seeded_moments(3, 1), 120.0),
+    (('wrench_controller', 'thrust_allocator'), _seeded_moments(11, 2), 120.0),
+    # At the run's first ticks: the run started only once both standbys kept the handoff.
+    (('wrench_controller', 'thrust_allocator'), (0.2, 0.2), 10.0),
+], ids=['allocator-seed3', 'both-seed11', 'both-first-ticks'])
 def test_killed_nodes_are_taken_over_bit_for_bit(ros: Any, tmp_path: Path,
-                                                 victims: tuple[str, ...], seed: int) -> None:
+                                                 victims: tuple[str, ...],
+                                                 kill_at: tuple[float, ...],
+                                                 duration: float) -> None:
     """kill -9 of the allocator (and the controller) at seeded random moments of a
-    recorded 120 s lockstep pid run with --respawn: each one's standby takes over with
-    the state its predecessor handed over (the pid's integral, the allocator's last
-    answer and servo travel), joins the run's handshake, and the plant publishes the
-    waited tick again once every node has matched it. The run ends normally and the
-    bag is the headless run without kills to the last bit, every step and tick in it
-    (the plant used no command before the bag had it)."""
+    recorded 120 s lockstep pid run with --respawn, or at its first ticks: each one's
+    standby (a node of the run's handshake, so the run started only once it had matched
+    the handoff's writers) takes over with the state its predecessor handed over (the
+    pid's integral, the allocator's last answer and servo travel), joins the run's
+    handshake, and the plant publishes the waited tick again once every node has
+    matched it. The run ends normally and the bag is the headless run without kills to
+    the last bit, every step and tick in it (the plant used no command before the bag
+    had it)."""
     from tiltrov_ros.bag.losses import missing_stamps
     from tiltrov_ros.bag.reader import read_runlog
 
-    rng = np.random.default_rng(seed)
-    kill_at = sorted(float(t) for t in rng.uniform(5.0, 100.0, len(victims)))
     bag = tmp_path / 'bag'
-    duration = 120.0
     respawn = [arg for v in victims for arg in ('--respawn', v)]
+    # The probe joins the run: a short lockstep run does not end before it sees a tick.
+    sim = joined_sim_time(ros, LaunchOptions(record=bag, respawn=victims,
+                                             join=('restart_probe',)), 'restart_probe')
     launch = _Launch(tmp_path, '--scenario', 'current_hold', '--controller', 'pid',
-                     '--duration', str(duration), '--record', str(bag), *respawn)
-    sim = SimTime(ros.node('sim_time_probe'))
+                     '--duration', str(duration), '--record', str(bag), *respawn,
+                     '--join', 'restart_probe')
     try:
         launch.wait_running()
+
         def progress() -> tuple[int, int]:   # sim time, or the launch saying something
             return sim.ns, len(launch.output)
 
@@ -196,52 +211,12 @@ def test_killed_nodes_are_taken_over_bit_for_bit(ros: Any, tmp_path: Path,
     out = launch.output
     for victim in victims:
         assert f'{victim} died (exit code {-signal.SIGKILL}); its standby' in out, out
-    assert out.count('every node of the run is ready again') == len(victims), out
-    assert 'resumed from its predecessor' in out or 'resumed the pid' in out
-    assert 'not bumpless' not in out and 'starts from zero' not in out, out
-    assert missing_stamps(bag, int(duration * NS), 10 * MS, 50 * MS) == {}
-    assert_same_run(read_runlog(bag), run_scenario(stack_config('current_hold', 'pid'),
-                                                   duration=duration), atol=0.0)
-
-
-@pytest.mark.slow
-@pytest.mark.timeout(HANG_BOUND)
-def test_nodes_killed_as_the_run_starts_are_taken_over_bit_for_bit(ros: Any,
-                                                                   tmp_path: Path) -> None:
-    """The standbys are nodes of the run's handshake: the run starts only once each one
-    has matched its node's handoff writers, so the controller and the allocator killed
-    at the run's first ticks (a recorded 10 s lockstep pid run with --respawn) still
-    hand over their state: each standby takes over with messages kept, nothing restarts
-    from zero, and the bag is the headless run without kills to the last bit."""
-    from tiltrov_ros.bag.losses import missing_stamps
-    from tiltrov_ros.bag.reader import read_runlog
-
-    bag = tmp_path / 'bag'
-    duration = 10.0
-    launch = _Launch(tmp_path, '--scenario', 'current_hold', '--controller', 'pid',
-                     '--duration', str(duration), '--record', str(bag),
-                     '--respawn', 'wrench_controller', '--respawn', 'thrust_allocator')
-    sim = SimTime(ros.node('sim_time_probe'))
-    try:
-        launch.wait_running()
-
-        def progress() -> tuple[int, int]:
-            return sim.ns, len(launch.output)
-
-        assert ros.spin_while_progressing(lambda: sim.reached(0.2), progress), launch.output
-        pids = launch.pids()
-        for victim in ('wrench_controller', 'thrust_allocator'):
-            os.kill(pids[victim], signal.SIGKILL)
-        assert ros.spin_while_progressing(lambda: launch.process.poll() is not None,
-                                          progress), launch.output
-        assert launch.finish(timeout=60) == 0, launch.output
-    finally:
-        launch.cleanup()
-    out = launch.output
-    for victim in ('wrench_controller', 'thrust_allocator'):
-        assert f'{victim} died (exit code {-signal.SIGKILL}); its standby' in out, out
         kept = re.search(rf'{victim}: taking over \((\d+) handoff messages kept\)', out)
         assert kept is not None and int(kept[1]) > 0, out
+    # One resume per kill moment (kills at one moment may be resumed from together).
+    assert len(set(kill_at)) <= out.count('every node of the run is ready again') \
+        <= len(victims), out
+    assert 'resumed from its predecessor' in out or 'resumed the pid' in out
     assert 'not bumpless' not in out and 'starts from zero' not in out, out
     assert missing_stamps(bag, int(duration * NS), 10 * MS, 50 * MS) == {}
     assert_same_run(read_runlog(bag), run_scenario(stack_config('current_hold', 'pid'),

@@ -94,6 +94,8 @@ ARGUMENTS = {
     'markers': ('true', 'true: the plant publishes robot_markers (for RViz and Foxglove)'),
     'respawn': ('', 'comma-separated nodes taken over by a standby when they die mid-run '
                     f'({", ".join(RESPAWNABLE)}); empty: none'),
+    'join': ('', "comma-separated nodes outside the package that join the run's handshake "
+                 '(the run starts once they have matched every node too); empty: none'),
 }
 
 
@@ -129,7 +131,8 @@ def options_from(values: dict[str, str]) -> LaunchOptions:
         robot=values['robot'] or None, lockstep=mode == LOCKSTEP,
         real_time_factor=factor, record=Path(values['record']) if values['record'] else None,
         namespace=values['namespace'], launcher='ros2 launch',
-        markers=values['markers'] == 'true', respawn=respawn)
+        markers=values['markers'] == 'true', respawn=respawn,
+        join=tuple(n for n in values['join'].split(',') if n))
 
 
 def _stack(context: LaunchContext) -> list[Any]:
