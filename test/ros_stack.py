@@ -19,7 +19,8 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
-from harness import spin_while_progressing
+from harness import HANG_BOUND as HANG_BOUND  # re-exported: the tests import it from here
+from harness import TreeProgress, spin_while_progressing
 from nav_msgs.msg import Odometry
 import numpy as np
 import pytest
@@ -308,6 +309,7 @@ class LaunchProcess:
             target=lambda: self.lines.extend(self.process.stdout or ()), daemon=True)
         self._reader.start()
         self.seen: set[int] = set()      # every pid the status file ever named
+        self.cpu = TreeProgress(self.process.pid)
 
     @property
     def output(self) -> str:
@@ -324,27 +326,38 @@ class LaunchProcess:
     def pids(self) -> dict[str, int]:
         return {name: node['pid'] for name, node in self.status().get('nodes', {}).items()}
 
+    def progress(self) -> tuple[int, int]:
+        """What the launch has said and the CPU its processes have used: it changes while
+        the launch starts, runs or stops, however slowly a loaded machine makes it."""
+        return len(self.output), self.cpu()
+
     def wait_running(self, idle: float = 120.0) -> dict[str, int]:
         """The nodes' pids once every node is started (state ``running``); a launch that
-        says nothing new for ``idle`` wall seconds meanwhile is hung (a loaded machine
-        starts the nodes slowly: 80 s once beside two busy loops and another stack)."""
-        seen, since = len(self.output), time.monotonic()
+        says nothing new and uses no CPU for ``idle`` wall seconds meanwhile is hung (a
+        loaded machine starts the nodes slowly: 80 s once beside two busy loops and
+        another stack)."""
+        seen, since = self.progress(), time.monotonic()
         while self.status().get('state') != 'running':
             assert self.process.poll() is None, self.output
-            if len(self.output) != seen:
-                seen, since = len(self.output), time.monotonic()
+            if self.progress() != seen:
+                seen, since = self.progress(), time.monotonic()
             assert time.monotonic() - since < idle, self.output
             time.sleep(0.05)
         return self.pids()
 
-    def finish(self, timeout: float) -> int:
-        try:
-            code = self.process.wait(timeout=timeout)
-        except subprocess.TimeoutExpired:
-            raise AssertionError(f'tiltrov launch still running after {timeout} s:\n'
-                                 + self.output) from None
+    def finish(self, idle: float = 120.0) -> int:
+        """The launch's exit code once it has ended, however slowly (AssertionError when
+        it said nothing new and used no CPU for ``idle`` wall seconds: a hang)."""
+        seen, since = self.progress(), time.monotonic()
+        while self.process.poll() is None:
+            if self.progress() != seen:
+                seen, since = self.progress(), time.monotonic()
+            if time.monotonic() - since > idle:
+                raise AssertionError(f'tiltrov launch hung (nothing for {idle} s):\n'
+                                     + self.output)
+            time.sleep(0.05)
         self._reader.join(timeout=5)
-        return code
+        return int(self.process.returncode)
 
     def cleanup(self) -> None:
         """Whatever a failed test left running: the launcher and the nodes it started."""
@@ -357,13 +370,20 @@ class LaunchProcess:
                 os.kill(pid, signal.SIGKILL)
 
 
-def ready(ros: Any, names: Sequence[str], until: Any = None,
-           timeout: float = 60.0) -> Probe:
+def ready(ros: Any, names: Sequence[str], launch: LaunchProcess,
+          until: Any = None) -> Probe:
     """Spin until every node in ``names`` has published /diagnostics (it is built and
-    spinning, its signal handlers installed) and ``until(probe)`` holds."""
+    spinning, its signal handlers installed) and ``until(probe)`` holds, for as long as
+    ``launch`` makes progress (:meth:`LaunchProcess.progress`: a loaded machine starts
+    the nodes slowly, a hang is what stops)."""
     probe = Probe(ros.node('launch_probe'), ['/diagnostics'])
-    assert ros.spin_until(lambda: all(diagnostics(probe, name) for name in names)
-                          and (until is None or until(probe)), timeout=timeout)
+
+    def seen() -> int:
+        return sum(bool(diagnostics(probe, name)) for name in names)
+
+    assert ros.spin_while_progressing(
+        lambda: seen() == len(names) and (until is None or until(probe)),
+        lambda: (seen(), launch.progress())), launch.output
     return probe
 
 
@@ -387,11 +407,6 @@ def assert_same_run(recorded: Any, expected: Any, atol: float = 1e-9) -> None:
     for name in RUN_SERIES:
         np.testing.assert_allclose(getattr(recorded, name), getattr(expected, name),
                                    rtol=0, atol=atol, err_msg=name)
-
-
-#: pytest-timeout of a test whose waits give up on a hang (``spin_while_progressing``), not
-#: on a slow machine: only a hang that its own waits missed reaches it.
-HANG_BOUND = 1200
 
 
 class SimTime:

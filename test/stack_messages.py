@@ -142,8 +142,18 @@ def canonical(data: bytes, msgtype: str) -> bytes:
 
 
 def wait_matched(ros: Any, publishers: list[Any], timeout: float = 10.0,
-                 subscribers: int = 1) -> None:
-    assert ros.spin_until(
-        lambda: all(p.get_subscription_count() >= subscribers for p in publishers),
-        timeout=timeout), [p.topic_name for p in publishers
-                           if p.get_subscription_count() < subscribers]
+                 subscribers: int = 1, process: Any = None) -> None:
+    """Spin until each of ``publishers`` has matched ``subscribers`` readers: within
+    ``timeout`` wall seconds, or, with ``process`` (a Popen whose node is the reader),
+    for as long as that process keeps using CPU (it may still be starting on a loaded
+    machine; a hang is what stops the wait)."""
+    def matched() -> bool:
+        return all(p.get_subscription_count() >= subscribers for p in publishers)
+
+    if process is None:
+        done = ros.spin_until(matched, timeout=timeout)
+    else:
+        from harness import TreeProgress
+        done = ros.spin_while_progressing(matched, TreeProgress(process.pid))
+    assert done, [p.topic_name for p in publishers
+                  if p.get_subscription_count() < subscribers]

@@ -18,9 +18,10 @@ import subprocess
 import sys
 from typing import Any
 
+from harness import TreeProgress, run_while_progressing
 import numpy as np
 import pytest
-from ros_stack import Probe, effort_rows
+from ros_stack import HANG_BOUND, Probe, effort_rows
 
 from tiltrov_ros import cli
 from tiltrov_ros.analysis.reallocate import compare, read_control
@@ -41,6 +42,11 @@ DURATION = '5'          # s of sim time: 501 plant steps, 100 control ticks
 CONTROLLERS = ('pd', 'switching')
 
 
+#: Whole launches record this module's bags (the fixture's time counts in the first test
+#: that uses it): their waits give up on a hang, not on a slow machine.
+pytestmark = pytest.mark.timeout(HANG_BOUND)
+
+
 @pytest.fixture(scope='module')
 def lockstep_bags(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """One bag per controller, recorded by ``tiltrov launch`` (separate processes)."""
@@ -48,10 +54,10 @@ def lockstep_bags(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     bags = {}
     for controller in CONTROLLERS:
         bag = root / controller / 'bag'
-        result = subprocess.run(
+        result = run_while_progressing(
             [sys.executable, '-m', 'tiltrov_ros.cli', 'launch', '--scenario', SCENARIO,
              '--controller', controller, '--duration', DURATION, '--record', str(bag)],
-            capture_output=True, text=True, timeout=150, cwd=root)
+            cwd=root)
         assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
         bags[controller] = bag
     return bags
@@ -190,17 +196,19 @@ def test_replayed_wrench_cmd_drives_the_allocator_like_the_live_stack(
             [sys.executable, '-m', 'tiltrov_ros.cli', 'replay', str(bag), '--topics',
              'wrench_cmd', '--by-stamp', '--join', f'{ALLOCATOR},replay_probe'],
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        assert ros.spin_until(lambda: player.poll() is not None
-                              and all(len(probe[t]) >= len(replayed) for t in probe.messages),
-                              timeout=120.0), sorted(set(replayed)
-                                                     - set(probe.stamps('thrust_cmd')))
+        cpu = TreeProgress(allocator.pid, player.pid)
+        assert ros.spin_while_progressing(
+            lambda: player.poll() is not None
+            and all(len(probe[t]) >= len(replayed) for t in probe.messages),
+            lambda: (sum(len(probe[t]) for t in probe.messages), cpu())), \
+            sorted(set(replayed) - set(probe.stamps('thrust_cmd')))
         ros.spin_for(0.2)               # nothing more comes
-        output = player.communicate(timeout=10)[0]
+        output = player.communicate()[0]
     finally:
         for process in (player, allocator):
             if process is not None and process.poll() is None:
                 process.terminate()
-        allocator_log = allocator.communicate(timeout=20)[0]
+        allocator_log = allocator.communicate()[0]
     assert player.returncode == 0, output
     assert f'published {len(replayed)} messages: /wrench_cmd {len(replayed)}' in output
     for topic in probe.messages:
@@ -236,10 +244,9 @@ def test_a_120_s_lockstep_run_is_recorded_without_losing_a_message(tmp_path: Pat
     """
     from tiltrov_ros.bag.losses import final_diagnostics, message_counts
     bag = tmp_path / 'bag'
-    result = subprocess.run(
+    result = run_while_progressing(
         [sys.executable, '-m', 'tiltrov_ros.cli', 'launch', '--scenario', 'trajectory',
-         '--controller', 'pid', '--record', str(bag)],
-        capture_output=True, text=True, timeout=170, cwd=tmp_path)
+         '--controller', 'pid', '--record', str(bag)], cwd=tmp_path)
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
     finals = final_diagnostics(bag)[0]
     again = int(finals['/plant_simulator']['republished_states'])

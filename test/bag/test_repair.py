@@ -18,7 +18,7 @@ from mcap_ros2.decoder import DecoderFactory
 import pytest
 from rclpy.qos import HistoryPolicy, QoSProfile
 from rclpy.serialization import serialize_message
-from ros_stack import installed
+from ros_stack import HANG_BOUND, installed
 from rosbags.rosbag2 import Reader
 from stack_messages import RUN_INFO, STACK, canonical, wait_matched
 import yaml
@@ -44,6 +44,7 @@ def read_back(bag: Path) -> tuple[dict[str, list[bytes]], dict[str, Any]]:
     return got, meta
 
 
+@pytest.mark.timeout(HANG_BOUND)
 def test_repair_recovers_what_a_killed_recorder_had_flushed(ros: Any, tmp_path: Path) -> None:
     bag = tmp_path / 'killed'
     argv = recorder_command(str(bag), run_info=RUN_INFO,
@@ -59,7 +60,7 @@ def test_repair_recovers_what_a_killed_recorder_had_flushed(ros: Any, tmp_path: 
         plant = ros.node('plant')
         keep_all = QoSProfile(history=HistoryPolicy.KEEP_ALL)
         pubs = {t: plant.create_publisher(STACK[t][0], t, keep_all) for t in TOPICS}
-        wait_matched(ros, list(pubs.values()), timeout=30.0)
+        wait_matched(ros, list(pubs.values()), process=proc)
         sent: dict[str, list[Any]] = {f'/{t}': [] for t in TOPICS}
         for i in range(2500):  # about 2.5 MB: two full 1 MiB chunks and a partial one
             for topic in TOPICS:

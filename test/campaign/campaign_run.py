@@ -9,9 +9,10 @@ from __future__ import annotations
 
 import csv
 from pathlib import Path
-import subprocess
 import sys
 from typing import NamedTuple
+
+from harness import run_while_progressing
 
 TINY = {
     'name': 'tiny', 'seed': 3, 'samples': 4, 'duration': 2.0, 'angle_unit': 'deg',
@@ -37,11 +38,12 @@ class CampaignRun(NamedTuple):
     stderr: str
 
 
-def tiltrov_campaign(*args: str | Path, timeout: float = 150.0) -> CampaignRun:
-    """``tiltrov campaign ARGS`` in a subprocess, as a user runs it."""
+def tiltrov_campaign(*args: str | Path) -> CampaignRun:
+    """``tiltrov campaign ARGS`` in a subprocess, as a user runs it, to its end however
+    slowly a loaded machine runs it (a hang fails it: :func:`run_while_progressing`)."""
     argv = [str(a) for a in args]
-    result = subprocess.run([sys.executable, '-m', 'tiltrov_ros.cli', 'campaign', *argv],
-                            capture_output=True, text=True, timeout=timeout)
+    result = run_while_progressing([sys.executable, '-m', 'tiltrov_ros.cli', 'campaign',
+                                    *argv])
     out = Path(argv[argv.index('--out') + 1]) if '--out' in argv else Path()
     return CampaignRun(out, result.returncode, result.stdout, result.stderr)
 

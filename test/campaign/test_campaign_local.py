@@ -7,10 +7,10 @@ import json
 import math
 import os
 from pathlib import Path
-import subprocess
 import sys
 
 from campaign_run import IDS, TINY, CampaignRun, read_rows, tiltrov_campaign
+from harness import HANG_BOUND, run_while_progressing
 import pytest
 import yaml
 
@@ -23,7 +23,8 @@ from tiltrov_ros.core.metrics import metric_differences
 from tiltrov_ros.core.names import DOF_NAMES
 from tiltrov_ros.core.yamlfile import flatten
 
-pytestmark = pytest.mark.slow
+#: Whole campaigns in processes: waits that give up on a hang, not on a slow machine.
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(HANG_BOUND)]
 
 
 def test_every_run_is_one_row_with_its_parameters_and_metrics(local_run: CampaignRun,
@@ -112,8 +113,8 @@ def test_an_exported_run_gives_the_same_metrics_with_tiltrov_sim(
                  'reproduce.sh'):      # the same files as the summary's worst runs
         assert (folder / name).read_text() == (local_run.out / 'worst' / run_id / name).read_text()
     env = {**os.environ, 'PATH': f'{Path(sys.executable).parent}{os.pathsep}{os.environ["PATH"]}'}
-    result = subprocess.run([str(folder / 'reproduce.sh'), '--no-figures'], env=env,
-                            capture_output=True, text=True, timeout=120)
+    result = run_while_progressing([str(folder / 'reproduce.sh'), '--no-figures'],
+                                   env=env)
     assert result.returncode == 0, result.stdout + result.stderr
     metrics = json.loads((folder / 'sim' / 'metrics.json').read_text())
     assert metric_differences(metrics, row_metrics(rows[run_id]), rtol=0.0, atol=0.0) == []
@@ -145,8 +146,8 @@ def test_a_gain_set_reaches_tiltrov_sim_through_the_exported_files(tmp_path: Pat
     assert exported.returncode == 0, exported.stderr
     folder = tmp_path / 'out' / 'runs' / task.run_id
     env = {**os.environ, 'PATH': f'{Path(sys.executable).parent}{os.pathsep}{os.environ["PATH"]}'}
-    result = subprocess.run([str(folder / 'reproduce.sh'), '--no-figures'], env=env,
-                            capture_output=True, text=True, timeout=120)
+    result = run_while_progressing([str(folder / 'reproduce.sh'), '--no-figures'],
+                                   env=env)
     assert result.returncode == 0, result.stderr
     metrics = json.loads((folder / 'sim' / 'metrics.json').read_text())
     assert metric_differences(metrics, expected, rtol=0.0, atol=0.0) == []

@@ -3,7 +3,7 @@ processes on this machine, random ports) gives the same table as on the local cl
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 import json
 import os
 from pathlib import Path
@@ -15,12 +15,14 @@ from typing import NamedTuple
 
 from campaign_run import CampaignRun, comparable, read_rows, tiltrov_campaign
 from distributed import Client
+from harness import HANG_BOUND, TreeProgress
 import pytest
 
 from tiltrov_ros.campaign import execute
 from tiltrov_ros.cli import main
 
-pytestmark = pytest.mark.slow
+#: A cluster and campaigns in processes: waits that give up on a hang, not on a slow machine.
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(HANG_BOUND)]
 DASK = str(Path(sys.executable).parent / 'dask')
 
 
@@ -34,6 +36,20 @@ def _stop(processes: list[subprocess.Popen[bytes]]) -> None:
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait(timeout=10)
+
+
+def _wait(done: Callable[[], bool], processes: list[subprocess.Popen[bytes]],
+          log: Path, idle: float = 120.0) -> None:
+    """Until ``done()``, however slowly a loaded machine starts ``processes``: failing
+    when one of them has ended, or none has used CPU for ``idle`` s (a hang)."""
+    progress = TreeProgress(*(p.pid for p in processes))
+    seen, since = progress(), time.monotonic()
+    while not done():
+        if progress() != seen:
+            seen, since = progress(), time.monotonic()
+        assert all(p.poll() is None for p in processes), log.read_text()
+        assert time.monotonic() - since < idle, log.read_text()
+        time.sleep(0.1)
 
 
 class Cluster(NamedTuple):
@@ -58,17 +74,15 @@ def scheduler(tmp_path: Path) -> Iterator[Cluster]:
         start('scheduler', 'scheduler', '--host', '127.0.0.1', '--port', '0',
               '--no-dashboard', '--dashboard-address', '127.0.0.1:0',
               '--scheduler-file', str(info))
-        deadline = time.monotonic() + 60
-        while not info.is_file() or not info.read_text().strip():
-            assert time.monotonic() < deadline and processes[0].poll() is None, \
-                (logs / 'scheduler.log').read_text()
-            time.sleep(0.1)
+        _wait(lambda: info.is_file() and bool(info.read_text().strip()), processes,
+              logs / 'scheduler.log')
         address = json.loads(info.read_text())['address']
         for k in (1, 2):
             start(f'worker{k}', 'worker', address, '--nthreads', '1', '--host', '127.0.0.1',
                   '--no-dashboard', '--dashboard-address', '127.0.0.1:0')
         with Client(address, timeout='60s') as client:
-            client.wait_for_workers(2, timeout=60)
+            _wait(lambda: len(client.scheduler_info()['workers']) >= 2, processes,
+                  logs / 'worker1.log')
             pids = set(client.run(os.getpid).values())
         yield Cluster(address, pids)
     finally:

@@ -11,6 +11,7 @@ import subprocess
 import threading
 from typing import Any
 
+from harness import wait_while_progressing
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from nav_msgs.msg import Odometry
@@ -22,7 +23,7 @@ from rclpy.exceptions import InvalidParameterValueException
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
-from ros_stack import installed
+from ros_stack import HANG_BOUND, installed
 from rosbags.interfaces import QosDurability, QosReliability
 from rosbags.rosbag2 import Reader
 from rosgraph_msgs.msg import Clock
@@ -218,6 +219,7 @@ def test_defaults_without_a_parameter_file(ros: Any, tmp_path: Path,
     assert (tmp_path / recorder.output / 'metadata.yaml').is_file()
 
 
+@pytest.mark.timeout(HANG_BOUND)
 @pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM])
 def test_a_signal_closes_the_bag(ros: Any, tmp_path: Path, sig: signal.Signals) -> None:
     """The standalone process records what it was sent and writes a complete bag."""
@@ -232,16 +234,17 @@ def test_a_signal_closes_the_bag(ros: Any, tmp_path: Path, sig: signal.Signals) 
     reader.start()
     try:
         pub = ros.node('plant').create_publisher(Odometry, 'odom', 100)
-        wait_matched(ros, [pub], timeout=30.0)
+        wait_matched(ros, [pub], process=proc)
         # The node has started once it logs where it records.
-        assert ros.spin_until(lambda: any('] [bag_recorder]: recording' in line
-                                          for line in lines), timeout=30.0), lines
+        assert ros.spin_while_progressing(lambda: any('] [bag_recorder]: recording' in line
+                                                      for line in lines),
+                                          lambda: len(lines)), lines
         for i in range(100):
             pub.publish(odom(i))
         # Acknowledged: in the recorder's queue, which it empties before closing.
         assert pub.wait_for_all_acked(Duration(seconds=10))
         proc.send_signal(sig)
-        proc.wait(timeout=20)
+        wait_while_progressing(proc)
     finally:
         if proc.poll() is None:
             proc.kill()

@@ -10,9 +10,9 @@ import shlex
 import signal
 import subprocess
 import sys
-import time
 from typing import Any
 
+from harness import TreeProgress, wait_while_progressing
 from workspace import Workspace
 
 #: What the tests need of the command line: ros2cli's verbs and ros2 launch.
@@ -147,6 +147,16 @@ class Ros2:
                         proc.wait(timeout=10)
         return [results[i] for i in range(len(commands))]
 
+    def run_to_end(self, *args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+        """``ros2 args...`` that runs a while (a launch, a whole run): to its end, however
+        slowly a loaded machine runs it (the wait gives up only on a hang,
+        :func:`wait_while_progressing`); its exit code and output (stdout and stderr
+        together)."""
+        log = cwd / f'ros2-{len(self.processes)}.log'
+        proc = self.start(['ros2', *args], cwd, log)
+        code = wait_while_progressing(proc)
+        return subprocess.CompletedProcess(proc.args, code, log.read_text(), '')
+
     def start(self, argv: list[str], cwd: Path, log: Path) -> subprocess.Popen[str]:
         """``argv`` in a session of its own (a terminal's foreground job), its output
         (stdout and stderr) into ``log``."""
@@ -165,28 +175,32 @@ class Ros2:
                 proc.wait(timeout=10)
 
 
-def ctrl_c(proc: subprocess.Popen[str], timeout: float) -> int:
+def ctrl_c(proc: subprocess.Popen[str]) -> int:
     """SIGINT to ``proc``'s session, as Ctrl-C in its terminal sends it to every
-    process of the foreground job; its exit code."""
+    process of the foreground job; its exit code, once it has ended (however slowly a
+    loaded machine stops it: the wait gives up only on a hang, :func:`wait_while_progressing`)."""
     os.killpg(proc.pid, signal.SIGINT)
-    return proc.wait(timeout=timeout)
+    return wait_while_progressing(proc)
 
 
-def wait_nodes(ros: Any, names: set[str], procs: list[subprocess.Popen[str]],
-               timeout: float = 60.0) -> None:
+def wait_nodes(ros: Any, names: set[str], procs: list[subprocess.Popen[str]]) -> None:
     """Spin a probe until the nodes ``names`` (full names) are in the graph, failing
-    at once when one of ``procs`` has ended."""
+    at once when one of ``procs`` has ended, and on a hang: nothing new in the graph
+    while ``procs`` used no CPU for a while (a loaded machine starts them slowly: one
+    node took over 60 s to appear beside two busy loops and another test's stack)."""
     probe = ros.node('cli_probe')
 
     def seen() -> set[str]:
         return {f'{ns.rstrip("/")}/{name}'
                 for name, ns in probe.get_node_names_and_namespaces()}
 
-    deadline = time.monotonic() + timeout
-    while not names <= seen():
-        ended = [p.args for p in procs if p.poll() is not None]
-        assert not ended and time.monotonic() < deadline, (ended, names - seen())
-        ros.spin_for(0.05)
+    def ended() -> list[Any]:
+        return [p.args for p in procs if p.poll() is not None]
+
+    cpu = TreeProgress(*(p.pid for p in procs))
+    ros.spin_while_progressing(lambda: names <= seen() or bool(ended()),
+                               lambda: (frozenset(seen()), cpu()))
+    assert names <= seen() and not ended(), (ended(), names - seen())
 
 
 def doc_commands(path: Path, start: str) -> list[list[str]]:

@@ -99,4 +99,4 @@ def test_node_list_param_get_and_set_answer_on_a_busy_recorded_run(
     finally:
         _plain(ros2, 'daemon', 'stop')
         if proc.poll() is None:
-            ctrl_c(proc, timeout=60)
+            ctrl_c(proc)

@@ -7,10 +7,10 @@ import os
 from pathlib import Path
 import re
 import signal
-import subprocess
 import sys
 from typing import Any
 
+from harness import run_while_progressing
 import numpy as np
 import pytest
 from ros_stack import HANG_BOUND, MS, NS, assert_same_run, joined_sim_time
@@ -32,9 +32,10 @@ def _tiltrov(*args: str) -> list[str]:
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(HANG_BOUND)
 def test_launch_runs_separate_processes_to_the_end(tmp_path: Path) -> None:
-    result = subprocess.run(_tiltrov('--scenario', 'pitch_hold', '--duration', '2'),
-                            capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    result = run_while_progressing(_tiltrov('--scenario', 'pitch_hold', '--duration', '2'),
+                                   cwd=tmp_path)
     assert result.returncode == 0, result.stdout + result.stderr
     lines = result.stdout.splitlines()
     for name in NODES:
@@ -46,11 +47,12 @@ def test_launch_runs_separate_processes_to_the_end(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(HANG_BOUND)
 def test_a_node_failing_at_start_stops_the_launch(tmp_path: Path) -> None:
     # 1 where 1.0 is declared: the controller refuses to start.
-    result = subprocess.run(_tiltrov('--duration', '2',
-                                     '--param', 'wrench_controller:switching.dwell_time:=1'),
-                            capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    result = run_while_progressing(
+        _tiltrov('--duration', '2', '--param', 'wrench_controller:switching.dwell_time:=1'),
+        cwd=tmp_path)
     assert result.returncode == 1
     assert 'wrench_controller died (exit code 1)' in result.stdout
     assert 'switching.dwell_time' in result.stdout
@@ -58,14 +60,15 @@ def test_a_node_failing_at_start_stops_the_launch(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(HANG_BOUND)
 def test_a_node_dying_mid_run_stops_the_others(ros: Any, tmp_path: Path) -> None:
     launch = _Launch(tmp_path, '--realtime', '--duration', '600')
     try:
         pids = launch.wait_running()
         assert set(pids) == set(NODES)
-        _ready(ros, NODES)
+        _ready(ros, NODES, launch)
         os.kill(pids['wrench_controller'], signal.SIGKILL)
-        assert launch.finish(timeout=60) == 1
+        assert launch.finish() == 1
         out = launch.output
         assert f'wrench_controller died (exit code {-signal.SIGKILL})' in out
         assert not any(_alive(pid) for pid in pids.values())
@@ -75,6 +78,7 @@ def test_a_node_dying_mid_run_stops_the_others(ros: Any, tmp_path: Path) -> None
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(HANG_BOUND)
 def test_a_dying_standby_stops_the_launch(tmp_path: Path) -> None:
     """A standby is a node of the run's handshake (the run waits for it): its death ends
     the launch as a node's does, naming it, and every process stops."""
@@ -84,7 +88,7 @@ def test_a_dying_standby_stops_the_launch(tmp_path: Path) -> None:
         pids = launch.wait_running()
         assert set(pids) == {*NODES, 'wrench_controller_standby'}
         os.kill(pids['wrench_controller_standby'], signal.SIGKILL)
-        assert launch.finish(timeout=60) == 1, launch.output
+        assert launch.finish() == 1, launch.output
         assert (f'wrench_controller_standby died (exit code {-signal.SIGKILL}); stopping '
                 'the other nodes') in launch.output
         assert not any(_alive(pid) for pid in pids.values())
@@ -93,6 +97,7 @@ def test_a_dying_standby_stops_the_launch(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(HANG_BOUND)
 def test_ctrl_c_stops_every_node_cleanly(ros: Any, tmp_path: Path) -> None:
     """Ctrl-C of a recorded realtime launch: every node stops cleanly, the recorder once it
     has every node's final report, and the bag is closed, readable and loses nothing."""
@@ -102,9 +107,9 @@ def test_ctrl_c_stops_every_node_cleanly(ros: Any, tmp_path: Path) -> None:
     launch = _Launch(tmp_path, '--realtime', '--duration', '600', '--record', str(bag))
     try:
         pids = launch.wait_running()
-        _ready(ros, (*NODES, 'bag_recorder'))
+        _ready(ros, (*NODES, 'bag_recorder'), launch)
         launch.process.send_signal(signal.SIGINT)
-        assert launch.finish(timeout=60) == 130, launch.output
+        assert launch.finish() == 130, launch.output
         out = launch.output
         assert 'SIGINT: stopping every node' in out
         assert 'SIGTERM' not in out and 'SIGKILL' not in out     # SIGINT was enough
@@ -116,6 +121,7 @@ def test_ctrl_c_stops_every_node_cleanly(ros: Any, tmp_path: Path) -> None:
 
 @pytest.mark.slow
 @pytest.mark.parametrize('single_process', [False, True])
+@pytest.mark.timeout(HANG_BOUND)
 def test_record_gives_a_bag_equal_to_the_headless_run(tmp_path: Path,
                                                       single_process: bool) -> None:
     from tiltrov_ros.bag.reader import read_runlog
@@ -123,8 +129,8 @@ def test_record_gives_a_bag_equal_to_the_headless_run(tmp_path: Path,
     bag = tmp_path / 'bag'
     args = ['--scenario', 'trajectory', '--controller', 'switching', '--duration', '2',
             '--record', str(bag), '--namespace', 'r1']
-    result = subprocess.run(_tiltrov(*args, *(['--single-process'] if single_process else [])),
-                            capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    result = run_while_progressing(
+        _tiltrov(*args, *(['--single-process'] if single_process else [])), cwd=tmp_path)
     assert result.returncode == 0, result.stdout + result.stderr
     recorded = read_runlog(bag, namespace='/r1')
     expected = run_scenario(stack_config('trajectory', 'switching'), duration=2.0)
@@ -132,6 +138,7 @@ def test_record_gives_a_bag_equal_to_the_headless_run(tmp_path: Path,
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(HANG_BOUND)
 def test_a_recorded_run_starts_on_the_handshake_with_one_message_per_step_and_tick(
         tmp_path: Path) -> None:
     """The plant publishes t = 0 once every node of the run (the recorder included) has
@@ -141,8 +148,8 @@ def test_a_recorded_run_starts_on_the_handshake_with_one_message_per_step_and_ti
     from tiltrov_ros.bag.losses import final_diagnostics
 
     bag = tmp_path / 'bag'
-    result = subprocess.run(_tiltrov('--duration', '2', '--record', str(bag)),
-                            capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    result = run_while_progressing(_tiltrov('--duration', '2', '--record', str(bag)),
+                                   cwd=tmp_path)
     assert result.returncode == 0, result.stdout + result.stderr
     assert result.stdout.count('every node of the run is ready') == 1, result.stdout
     counts = {name: topic.count for name, topic in bag_info(bag).topics.items()}
@@ -196,8 +203,8 @@ def test_killed_nodes_are_taken_over_bit_for_bit(ros: Any, tmp_path: Path,
     try:
         launch.wait_running()
 
-        def progress() -> tuple[int, int]:   # sim time, or the launch saying something
-            return sim.ns, len(launch.output)
+        def progress() -> tuple[int, tuple[int, int]]:   # sim time, or the launch moving
+            return sim.ns, launch.progress()
 
         for victim, at in zip(victims, kill_at):
             assert ros.spin_while_progressing(lambda at=at: sim.reached(at), progress), \
@@ -205,7 +212,7 @@ def test_killed_nodes_are_taken_over_bit_for_bit(ros: Any, tmp_path: Path,
             os.kill(launch.pids()[victim], signal.SIGKILL)
         assert ros.spin_while_progressing(lambda: launch.process.poll() is not None,
                                           progress), launch.output
-        assert launch.finish(timeout=60) == 0, launch.output
+        assert launch.finish() == 0, launch.output
     finally:
         launch.cleanup()
     out = launch.output

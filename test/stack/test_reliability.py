@@ -16,10 +16,12 @@ import time
 from typing import Any
 
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
+from harness import TreeProgress, run_while_progressing
 from nav_msgs.msg import Odometry
 import pytest
 from rclpy.serialization import serialize_message
 from ros_stack import (
+    HANG_BOUND,
     KEEP_ALL,
     LaunchProcess,
     Probe,
@@ -56,7 +58,7 @@ def _stepping(probe: Probe) -> bool:
 
 def _stop(launch: LaunchProcess) -> int:
     launch.process.send_signal(signal.SIGINT)
-    return launch.finish(timeout=60)
+    return launch.finish()
 
 
 # --------------------------------------------------------------------------- /clock
@@ -64,6 +66,7 @@ def _stop(launch: LaunchProcess) -> int:
 
 @pytest.mark.slow
 @pytest.mark.parametrize('single_process', [False, True], ids=['processes', 'single_process'])
+@pytest.mark.timeout(HANG_BOUND)
 def test_a_clock_sample_with_a_negative_second_is_rejected_by_every_node(
         ros: Any, tmp_path: Path, single_process: bool) -> None:
     """One /clock message with sec = -1 (a bad replay, a buggy simulator): every node on
@@ -77,7 +80,7 @@ def test_a_clock_sample_with_a_negative_second_is_rejected_by_every_node(
                            *(['--single-process'] if single_process else []))
     try:
         launch.wait_running()
-        probe = ready(ros, STACK, until=_stepping)
+        probe = ready(ros, STACK, launch, until=_stepping)
         attacker = ros.node('clock_attacker')
         pub = attacker.create_publisher(Clock, '/clock', KEEP_ALL)
         bad = Clock()
@@ -150,7 +153,7 @@ _FIRST_TICK_ANSWERED = 0.01
 
 def _recorder_stopped(ros: Any, tmp_path: Path, bag: Path, args: tuple[str, ...],
                       stop_at: float, resume_when: Callable[[SimTime, dict[str, int]], bool],
-                      *, timeout: float, behind: float = 0.0) -> tuple[int, str]:
+                      *, behind: float = 0.0) -> tuple[int, str]:
     """``tiltrov launch ARGS --record BAG`` with the recorder stopped (SIGSTOP) once
     the sim time reaches ``stop_at`` s and resumed (SIGCONT) ``behind`` s after
     ``resume_when(sim time, pids)`` holds: the launch's exit code and output."""
@@ -158,15 +161,17 @@ def _recorder_stopped(ros: Any, tmp_path: Path, bag: Path, args: tuple[str, ...]
     launch = LaunchProcess(tmp_path, *args, *_WAIT_FOR_THE_TEST, '--record', str(bag))
     try:
         pids = launch.wait_running()
-        assert ros.spin_until(lambda: sim.reached(stop_at), timeout=timeout), launch.output
+        assert ros.spin_while_progressing(lambda: sim.reached(stop_at), launch.progress), \
+            launch.output
         os.kill(pids['bag_recorder'], signal.SIGSTOP)
         try:
-            assert ros.spin_until(lambda: resume_when(sim, pids), timeout=timeout), \
+            assert ros.spin_while_progressing(lambda: resume_when(sim, pids),
+                                              lambda: (sim.ns, launch.progress())), \
                 launch.output
             ros.spin_for(behind)
         finally:
             os.kill(pids['bag_recorder'], signal.SIGCONT)
-        code = launch.finish(timeout=120)
+        code = launch.finish()
     finally:
         launch.cleanup()
     return code, launch.output
@@ -177,6 +182,7 @@ def _nan_odom(ns: int) -> Odometry:
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(HANG_BOUND)
 def test_rejected_odometry_stamped_ahead_does_not_take_control(ros: Any,
                                                                tmp_path: Path) -> None:
     """NaN odometry stamped 0.45 s ahead of /clock, every 0.4 s for 5 s (realtime): each
@@ -186,7 +192,7 @@ def test_rejected_odometry_stamped_ahead_does_not_take_control(ros: Any,
     launch = LaunchProcess(tmp_path, '--realtime', '--duration', '600')
     try:
         launch.wait_running()
-        probe = ready(ros, STACK, until=_stepping)
+        probe = ready(ros, STACK, launch, until=_stepping)
         watch = Probe(ros.node('thrust_probe'), ['odom', 'joint_states', '/clock'])
         attacker = ros.node('odom_attacker')
         pub = attacker.create_publisher(Odometry, 'odom', KEEP_ALL)
@@ -221,6 +227,7 @@ def test_rejected_odometry_stamped_ahead_does_not_take_control(ros: Any,
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(HANG_BOUND)
 def test_a_valid_command_stamped_ahead_does_not_shut_out_the_real_ones(ros: Any,
                                                                        tmp_path: Path) -> None:
     """A tool sending a valid thrust_cmd (zero thrust) stamped 0.45 s ahead of the plant,
@@ -231,7 +238,7 @@ def test_a_valid_command_stamped_ahead_does_not_shut_out_the_real_ones(ros: Any,
     launch = LaunchProcess(tmp_path, '--realtime', '--duration', '600')
     try:
         launch.wait_running()
-        probe = ready(ros, STACK, until=_stepping)
+        probe = ready(ros, STACK, launch, until=_stepping)
         watch = Probe(ros.node('thrust_probe'), ['odom', 'joint_states'])
         pub = ros.node('thrust_attacker').create_publisher(JointState, 'thrust_cmd', KEEP_ALL)
         # The plant's time as fresh as the test can have it (one sample kept): read
@@ -265,6 +272,7 @@ def test_a_valid_command_stamped_ahead_does_not_shut_out_the_real_ones(ros: Any,
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(HANG_BOUND)
 def test_rejected_odometry_stamped_back_resets_nothing(ros: Any, tmp_path: Path) -> None:
     """NaN odometry stamped 1 s back (a control tick): rejected before anything acts on
     it (before: the controller reset first, losing the PID integral, and the reset
@@ -272,7 +280,7 @@ def test_rejected_odometry_stamped_back_resets_nothing(ros: Any, tmp_path: Path)
     launch = LaunchProcess(tmp_path, '--realtime', '--duration', '600', '--controller', 'pid')
     try:
         launch.wait_running()
-        probe = ready(ros, STACK, until=_stepping)
+        probe = ready(ros, STACK, launch, until=_stepping)
         watch = Probe(ros.node('clock_probe'), ['/clock'])
         pub = ros.node('odom_attacker').create_publisher(Odometry, 'odom', KEEP_ALL)
         assert ros.spin_until(lambda: len(watch['/clock']) > 0
@@ -311,6 +319,7 @@ TYPES = {'odom': Odometry, 'setpoint': PoseStamped, 'setpoint_velocity': TwistSt
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(HANG_BOUND)
 def test_truncated_cdr_on_every_topic_a_node_reads_is_rejected_and_counted(
         ros: Any, tmp_path: Path) -> None:
     """Samples cut short (a faulty bridge, a tool writing raw bytes) on every topic the
@@ -321,7 +330,7 @@ def test_truncated_cdr_on_every_topic_a_node_reads_is_rejected_and_counted(
                            'switching')
     try:
         launch.wait_running()
-        probe = ready(ros, STACK, until=_stepping)
+        probe = ready(ros, STACK, launch, until=_stepping)
         watch = Probe(ros.node('clock_probe'), ['/clock'])
         attacker = ros.node('cdr_attacker')
         pubs = {topic: attacker.create_publisher(msg_type, topic, KEEP_ALL)
@@ -377,18 +386,17 @@ def _node_process(node: str, *ros_args: str) -> subprocess.Popen[str]:
 
 
 def _ended(process: subprocess.Popen[str]) -> str:
-    """Stop ``process`` (SIGINT, then SIGKILL) and return its output."""
+    """Stop ``process`` (SIGINT) and return its output."""
     if process.poll() is None:
         process.send_signal(signal.SIGINT)
-        try:
-            process.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            process.kill()
-    out, _ = process.communicate(timeout=20)
+    # To its end, reading what it says meanwhile (a full pipe would block it); a hang
+    # is the test's HANG_BOUND's.
+    out, _ = process.communicate()
     return out
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(HANG_BOUND)
 def test_a_stray_tilt_request_publisher_does_not_silence_the_allocator(ros: Any) -> None:
     """The allocator as shipped (``tilt_request: auto``) under wrenches at 20/s; a stray
     tool creates a tilt_request publisher and sends one request: the wrenches are
@@ -399,8 +407,10 @@ def test_a_stray_tilt_request_publisher_does_not_silence_the_allocator(ros: Any)
         node = ros.node('wrench_source')
         probe = Probe(node, ['thrust_cmd', '/diagnostics'])
         pub = node.create_publisher(WrenchStamped, 'wrench_cmd', KEEP_ALL)
-        assert ros.spin_until(lambda: pub.get_subscription_count() > 0
-                              and bool(diagnostics(probe, ALLOCATOR)), timeout=30.0)
+        # The node's start, however slow the machine: up to a hang of its process.
+        assert ros.spin_while_progressing(lambda: pub.get_subscription_count() > 0
+                                          and bool(diagnostics(probe, ALLOCATOR)),
+                                          TreeProgress(process.pid)), process.poll()
         sent: list[int] = []
         next_at = time.monotonic()
 
@@ -469,13 +479,13 @@ def _bad_file(tmp_path: Path, kind: str) -> Path:
 @pytest.mark.slow
 @pytest.mark.parametrize('kind', sorted(BAD_FILES))
 @pytest.mark.parametrize('node', NODE_MODULES)
+@pytest.mark.timeout(HANG_BOUND)
 def test_an_unreadable_parameter_file_stops_a_node_with_one_line(
         tmp_path: Path, node: str, kind: str) -> None:
     path = _bad_file(tmp_path, kind)
-    result = subprocess.run(
+    result = run_while_progressing(
         [sys.executable, '-m', f'tiltrov_ros.nodes.{node}', '--ros-args', '--params-file',
-         str(path), '-p', f'output:={tmp_path / "bag"}'],
-        capture_output=True, text=True, timeout=60, cwd=tmp_path)
+         str(path), '-p', f'output:={tmp_path / "bag"}'], cwd=tmp_path)
     assert result.returncode == 1
     assert result.stdout == ''
     lines = result.stderr.splitlines()
@@ -490,13 +500,13 @@ def test_an_unreadable_parameter_file_stops_a_node_with_one_line(
     (('--param', 'wrench_controller:gains.kp:=[1,'),
      '--param wrench_controller:gains.kp:=[1,: the value is not YAML', 2),
 ], ids=['scenario_random_bytes', 'scenario_not_yaml', 'param_not_yaml'])
+@pytest.mark.timeout(HANG_BOUND)
 def test_tiltrov_launch_names_an_unreadable_input_in_one_line(
         tmp_path: Path, args: tuple[str, ...], message: str, code: int) -> None:
     files = {kind: _bad_file(tmp_path, kind) for kind in ('random_bytes', 'not_yaml')}
-    result = subprocess.run(
+    result = run_while_progressing(
         [sys.executable, '-m', 'tiltrov_ros.cli', 'launch', '--duration', '1',
-         *(a.format(**files) for a in args)],
-        capture_output=True, text=True, timeout=60, cwd=tmp_path)
+         *(a.format(**files) for a in args)], cwd=tmp_path)
     assert result.returncode == code
     lines = result.stderr.splitlines()
     assert len(lines) == 1 and lines[0].startswith(
@@ -522,14 +532,15 @@ def small_disk(tmp_path: Path) -> Any:
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(HANG_BOUND)
 def test_recording_into_a_full_disk_fails_the_launch_and_says_what_was_lost(
         tmp_path: Path, small_disk: Path) -> None:
     """``tiltrov launch --record`` into a 2 MiB disk: the stack runs to the end, the
     launch exits 1 saying the recording lost data (before: exit code 0)."""
     bag = small_disk / 'bag'
-    result = subprocess.run(
+    result = run_while_progressing(
         [sys.executable, '-m', 'tiltrov_ros.cli', 'launch', '--duration', '30',
-         '--record', str(bag)], capture_output=True, text=True, timeout=300, cwd=tmp_path)
+         '--record', str(bag)], cwd=tmp_path)
     assert result.returncode == 1, result.stdout + result.stderr
     assert 'reached the end of the run at 30.000 s' in result.stdout
     assert 'bag_recorder: data lost in' in result.stdout
@@ -572,6 +583,7 @@ def _loss_report(bag: Path, output: str, info: str) -> list[str]:
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(HANG_BOUND)
 def test_a_recorder_that_falls_behind_fails_the_launch_and_bag_info_says_what_was_lost(
         ros: Any, tmp_path: Path) -> None:
     """The recorder stopped (SIGSTOP) for 135 s of a realtime run at x10: more samples
@@ -588,13 +600,14 @@ def test_a_recorder_that_falls_behind_fails_the_launch_and_bag_info_says_what_wa
     bag = tmp_path / 'bag'
     code, output = _recorder_stopped(
         ros, tmp_path, bag, ('--realtime', '--real-time-factor', '10', '--duration', '150'),
-        5, lambda sim, _: sim.reached(140), timeout=60.0)
+        5, lambda sim, _: sim.reached(140))
     assert code == 1, output
     assert _loss_report(bag, output, _bag_info(bag))
     assert 'Traceback' not in output
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(HANG_BOUND)
 def test_a_stopped_recorder_holds_a_paced_run_and_nothing_is_lost(ros: Any,
                                                                   tmp_path: Path) -> None:
     """The recorder stopped (SIGSTOP) from the first tick of a recorded 60 s lockstep run
@@ -611,8 +624,9 @@ def test_a_stopped_recorder_holds_a_paced_run_and_nothing_is_lost(ros: Any,
                            '--record', str(bag))
     try:
         pids = launch.wait_running()
-        probe = ready(ros, (PLANT,))
-        assert ros.spin_until(lambda: sim.reached(_FIRST_TICK_ANSWERED), timeout=60.0)
+        probe = ready(ros, (PLANT,), launch)
+        assert ros.spin_while_progressing(lambda: sim.reached(_FIRST_TICK_ANSWERED),
+                                          launch.progress), launch.output
         os.kill(pids['bag_recorder'], signal.SIGSTOP)
         try:
             def held() -> bool:
@@ -626,7 +640,7 @@ def test_a_stopped_recorder_holds_a_paced_run_and_nothing_is_lost(ros: Any,
             assert plant['waiting_for'] == 'bag_recorder (paced)'
         finally:
             os.kill(pids['bag_recorder'], signal.SIGCONT)
-        code = launch.finish(timeout=120)
+        code = launch.finish()
     finally:
         launch.cleanup()
     assert code == 0, launch.output
@@ -642,6 +656,7 @@ def test_a_stopped_recorder_holds_a_paced_run_and_nothing_is_lost(ros: Any,
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(HANG_BOUND)
 def test_a_killed_recorder_ends_the_run_with_exit_1_naming_it(ros: Any,
                                                                tmp_path: Path) -> None:
     """kill -9 of the recorder mid-run (lockstep, paced by it): nothing waits for it any
@@ -652,9 +667,10 @@ def test_a_killed_recorder_ends_the_run_with_exit_1_naming_it(ros: Any,
                            '--record', str(bag))
     try:
         pids = launch.wait_running()
-        assert ros.spin_until(lambda: sim.reached(1.0), timeout=60.0), launch.output
+        assert ros.spin_while_progressing(lambda: sim.reached(1.0), launch.progress), \
+            launch.output
         os.kill(pids['bag_recorder'], signal.SIGKILL)
-        code = launch.finish(timeout=120)
+        code = launch.finish()
     finally:
         launch.cleanup()
     assert code == 1, launch.output
@@ -665,11 +681,11 @@ def test_a_killed_recorder_ends_the_run_with_exit_1_naming_it(ros: Any,
 # --------------------------------------------------------------------------- smaller ones
 
 
+@pytest.mark.timeout(HANG_BOUND)
 def test_bag_repair_of_a_garbage_metadata_file_is_one_line(tmp_path: Path) -> None:
     bag = tmp_path / 'bag'
-    result = subprocess.run([sys.executable, '-m', 'tiltrov_ros.cli', 'launch', '--duration',
-                             '0.5', '--record', str(bag)], capture_output=True, text=True,
-                            timeout=120, cwd=tmp_path)
+    result = run_while_progressing([sys.executable, '-m', 'tiltrov_ros.cli', 'launch',
+                                    '--duration', '0.5', '--record', str(bag)], cwd=tmp_path)
     assert result.returncode == 0, result.stdout + result.stderr
     (bag / 'metadata.yaml').write_bytes(bytes(range(256)) * 8)
     repaired = subprocess.run([sys.executable, '-m', 'tiltrov_ros.cli', 'bag', 'repair',
@@ -680,6 +696,7 @@ def test_bag_repair_of_a_garbage_metadata_file_is_one_line(tmp_path: Path) -> No
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(HANG_BOUND)
 def test_a_huge_frame_id_is_cut_in_the_log_and_a_second_plant_is_named(ros: Any) -> None:
     """Odometry with a 1 MB frame_id: the controller's log grows by a few kB, not
     megabytes. Two nodes publishing odom (a second simulator): the controller's
@@ -689,8 +706,11 @@ def test_a_huge_frame_id_is_cut_in_the_log_and_a_second_plant_is_named(ros: Any)
         probe = Probe(ros.node('diagnostics_probe'), ['/diagnostics'])
         pubs = [ros.node(name).create_publisher(Odometry, 'odom', KEEP_ALL)
                 for name in ('first_plant', 'second_plant')]
-        assert ros.spin_until(lambda: all(p.get_subscription_count() > 0 for p in pubs)
-                              and bool(diagnostics(probe, CONTROLLER)), timeout=30.0)
+        # The node's start, however slow the machine: up to a hang of its process.
+        assert ros.spin_while_progressing(lambda: all(p.get_subscription_count() > 0
+                                                      for p in pubs)
+                                          and bool(diagnostics(probe, CONTROLLER)),
+                                          TreeProgress(process.pid)), process.poll()
         sent = 0
         last_sent = -1.0
 
