@@ -13,6 +13,7 @@ import subprocess
 import sys
 from typing import Any
 
+from harness import HANG_BOUND, run_while_progressing
 import numpy as np
 import pytest
 
@@ -28,9 +29,10 @@ SIM = ['sim', '--scenario', 'pitch_hold', '--controller', 'pid', '--duration', '
        '--no-figures']
 
 needs_numba = pytest.mark.skipif(not jit.compiled(), reason='numba is not the backend here')
-#: s: compiling every kernel from nothing (37 s of CPU time; 159 s of wall time was seen
-#: on a 2-core machine running other jobs).
-COLD = 600
+#: Compiling every kernel from nothing takes 37 s of CPU time (159 s of wall time was seen
+#: on a 2-core machine running other jobs): the commands run to their end while they use
+#: CPU, and only a hang fails them.
+pytestmark = pytest.mark.timeout(HANG_BOUND)
 
 
 def _env(**changes: str | None) -> dict[str, str]:
@@ -45,10 +47,8 @@ def _env(**changes: str | None) -> dict[str, str]:
     return env
 
 
-def _python(code: str, env: dict[str, str], timeout: float = 170.0
-            ) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
-                          env=env, timeout=timeout, cwd=REPO)
+def _python(code: str, env: dict[str, str]) -> subprocess.CompletedProcess[str]:
+    return run_while_progressing([sys.executable, '-c', code], env=env, cwd=REPO)
 
 
 def _last_json(stdout: str) -> dict[str, Any]:
@@ -59,7 +59,6 @@ def _last_json(stdout: str) -> dict[str, Any]:
 # -- nothing compiles after construction ------------------------------------------------
 
 @pytest.mark.slow
-@pytest.mark.timeout(COLD + 60)
 @needs_numba
 def test_on_a_cold_cache_the_constructors_compile_everything_a_run_uses(tmp_path: Path) -> None:
     """The four stack nodes in-process (real rclpy context) and the runner's objects on an
@@ -67,9 +66,9 @@ def test_on_a_cold_cache_the_constructors_compile_everything_a_run_uses(tmp_path
     controller: numba compiles nothing and loads nothing more."""
     cache = tmp_path / 'cache'
     cache.mkdir()
-    result = subprocess.run([sys.executable, str(REPO / 'test' / 'kernel_start.py'), 'stack'],
-                            capture_output=True, text=True, timeout=COLD, cwd=REPO,
-                            env=_env(NUMBA_CACHE_DIR=str(cache)))
+    result = run_while_progressing(
+        [sys.executable, str(REPO / 'test' / 'kernel_start.py'), 'stack'], cwd=REPO,
+        env=_env(NUMBA_CACHE_DIR=str(cache)))
     assert result.returncode == 0, result.stderr
     # A cold cache is said, once per node's groups, before the compiler's silent minute.
     told = [line for line in result.stderr.splitlines() if 'tiltrov_ros: compiling the' in line]
@@ -91,8 +90,9 @@ def test_on_a_cold_cache_the_constructors_compile_everything_a_run_uses(tmp_path
 
 @needs_numba
 def test_the_runners_objects_warm_themselves() -> None:
-    result = subprocess.run([sys.executable, str(REPO / 'test' / 'kernel_start.py'), 'runner'],
-                            capture_output=True, text=True, timeout=170, cwd=REPO, env=_env())
+    result = run_while_progressing(
+        [sys.executable, str(REPO / 'test' / 'kernel_start.py'), 'runner'], cwd=REPO,
+        env=_env())
     assert result.returncode == 0, result.stderr
     assert 'compiling the' not in result.stderr      # loaded from the warm cache: not said
     report = _last_json(result.stdout)
@@ -144,17 +144,15 @@ def _read_only(dirs: list[Path], argv: list[str], env: dict[str, str], cwd: Path
         for d in dirs:
             for path in (d, *d.rglob('*')):
                 path.chmod(path.stat().st_mode & ~0o222)
-        return subprocess.run(argv, capture_output=True, text=True, env=env, timeout=170,
-                              cwd=cwd)
+        return run_while_progressing(argv, env=env, cwd=cwd)
     probe = subprocess.run(['unshare', '-rm', 'true'], capture_output=True) \
         if shutil.which('unshare') else None
     if probe is None or probe.returncode != 0:
         pytest.skip('running as root without user namespaces: nothing is read-only for root')
     mounts = ''.join(f'mount --bind "{d}" "{d}"; mount -o remount,bind,ro "{d}"; '
                      for d in dirs)
-    return subprocess.run(['unshare', '-rm', 'sh', '-c', f'set -e; {mounts}exec "$@"', 'sh',
-                           *argv], capture_output=True, text=True, env=env, timeout=170,
-                          cwd=cwd)
+    return run_while_progressing(['unshare', '-rm', 'sh', '-c',
+                                  f'set -e; {mounts}exec "$@"', 'sh', *argv], env=env, cwd=cwd)
 
 
 def _copy_package(target: Path) -> Path:
@@ -280,17 +278,16 @@ def test_an_unknown_backend_is_named_and_the_reference_runs() -> None:
 
 
 def test_tiltrov_warmup_names_the_backend_the_cache_and_each_group() -> None:
-    result = subprocess.run([sys.executable, '-m', 'tiltrov_ros.cli', 'warmup'],
-                            capture_output=True, text=True, timeout=170, env=_env(), cwd=REPO)
+    result = run_while_progressing([sys.executable, '-m', 'tiltrov_ros.cli', 'warmup'],
+                                   env=_env(), cwd=REPO)
     assert result.returncode == 0, result.stderr
     lines = result.stdout.splitlines()
     if jit.compiled():
         assert lines[0].startswith('backend: numba') and lines[1].startswith('cache:')
         for group in jit.GROUPS:
             assert any(line.split()[0] == group for line in lines[2:])
-    numpy = subprocess.run([sys.executable, '-m', 'tiltrov_ros.cli', 'warmup'],
-                           capture_output=True, text=True, timeout=170, cwd=REPO,
-                           env=_env(TILTROV_BACKEND='numpy'))
+    numpy = run_while_progressing([sys.executable, '-m', 'tiltrov_ros.cli', 'warmup'],
+                                  cwd=REPO, env=_env(TILTROV_BACKEND='numpy'))
     assert numpy.returncode == 0
     assert numpy.stdout.splitlines() == ['backend: numpy (TILTROV_BACKEND=numpy)',
                                          'nothing to compile: the numpy reference runs']
@@ -313,9 +310,8 @@ def test_the_cache_is_keyed_by_the_sources_and_shared_by_their_installs(
             'print(json.dumps([jit.backend(), jit.describe()["cache_dir"], len(done)]))\n')
 
     def warm(install: Path) -> tuple[str, Path, int]:
-        result = subprocess.run([sys.executable, '-c', code], env=dict(
-            env, PYTHONPATH=str(install)), capture_output=True, text=True, timeout=300,
-            cwd=tmp_path)
+        result = run_while_progressing([sys.executable, '-c', code],
+                                       env=dict(env, PYTHONPATH=str(install)), cwd=tmp_path)
         assert result.returncode == 0, result.stderr
         name, directory, compiled = _last_json(result.stdout)
         return name, Path(directory or '.'), compiled

@@ -10,9 +10,9 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 import re
-import subprocess
 import sys
 
+from harness import run_while_progressing
 import pytest
 
 REPO = Path(__file__).resolve().parent.parent
@@ -119,6 +119,5 @@ def test_the_analysis_and_the_campaigns_load_no_ros(package: str) -> None:
         f'ros = sorted(m for m in sys.modules if m.split(".")[0] in {ROS_PACKAGES!r})\n'
         'print(ros)\n'
         'sys.exit(1 if ros else 0)\n')
-    result = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
-                            timeout=120)
+    result = run_while_progressing([sys.executable, '-c', code])
     assert result.returncode == 0, result.stdout + result.stderr

@@ -11,10 +11,10 @@ at every ``odom`` stamp and gives the odometry; nothing went to the root tree;
 from __future__ import annotations
 
 from pathlib import Path
-import subprocess
 import sys
 from typing import Any
 
+from harness import HANG_BOUND, run_while_progressing
 import pytest
 from rclpy.serialization import deserialize_message
 from ros_stack import require_tf2_msgs
@@ -28,15 +28,19 @@ from tiltrov_ros.core.timebase import to_ns
 DURATION = 2.0
 
 
+#: A whole launch records the module's bag (its time counts in the first test that uses
+#: it): its wait gives up on a hang, not on a slow machine.
+pytestmark = pytest.mark.timeout(HANG_BOUND)
+
+
 @pytest.fixture(scope='module')
 def bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
     require_tf2_msgs()
     root = tmp_path_factory.mktemp('tf_bag')
     bag = root / 'bag'
-    result = subprocess.run(
+    result = run_while_progressing(
         [sys.executable, '-m', 'tiltrov_ros.cli', 'launch', '--scenario', 'pitch_hold',
-         '--duration', str(DURATION), '--namespace', 'r1', '--record', str(bag)],
-        capture_output=True, text=True, timeout=150, cwd=root)
+         '--duration', str(DURATION), '--namespace', 'r1', '--record', str(bag)], cwd=root)
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
     return bag
 

@@ -7,9 +7,9 @@ from functools import cache
 import json
 import math
 from pathlib import Path
-import subprocess
 import sys
 
+from harness import run_while_progressing
 import numpy as np
 import pytest
 
@@ -200,8 +200,7 @@ def test_through_allocator_needs_no_ros(tmp_path: Path) -> None:
               f'"--no-figures", "--out", {str(tmp_path / "out")!r}]); '
               'assert code == 0, code; '
               'assert not [m for m in sys.modules if m.startswith(("rclpy", "rosgraph_msgs"))]')
-    result = subprocess.run([sys.executable, '-c', script], capture_output=True, text=True,
-                            timeout=120)
+    result = run_while_progressing([sys.executable, '-c', script])
     assert result.returncode == 0, result.stderr
     assert (tmp_path / 'out' / 'allocation.json').is_file()
     assert not (tmp_path / 'out' / 'allocation.png').exists()

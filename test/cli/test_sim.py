@@ -5,9 +5,9 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-import subprocess
 import sys
 
+from harness import run_while_progressing
 import numpy as np
 import pytest
 
@@ -104,9 +104,8 @@ def test_bad_input_is_one_line_and_exit_code_2(tmp_path: Path, capsys, args: lis
 
 
 def test_the_command_line_exit_code_and_no_traceback(tmp_path: Path) -> None:
-    result = subprocess.run([sys.executable, '-m', 'tiltrov_ros.cli', 'sim', '--scenario',
-                             'nonesuch', '--out', str(tmp_path)], capture_output=True,
-                            text=True, timeout=120)
+    result = run_while_progressing([sys.executable, '-m', 'tiltrov_ros.cli', 'sim', '--scenario',
+                             'nonesuch', '--out', str(tmp_path)])
     assert result.returncode == 2
     assert 'Traceback' not in result.stderr
     assert result.stderr.strip().startswith('tiltrov sim: error: no scenario named')

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-import subprocess
 import sys
 
+from harness import run_while_progressing
 import pytest
 
 from tiltrov_ros.cli import soak
@@ -15,10 +15,9 @@ from tiltrov_ros.cli import soak
 @pytest.mark.slow
 def test_short_soak_reports_memory_counts_and_stalls(tmp_path: Path) -> None:
     out = tmp_path / 'soak'
-    result = subprocess.run(
+    result = run_while_progressing(
         [sys.executable, '-m', 'tiltrov_ros.cli', 'soak', '--duration', '2', '--out', str(out),
-         '--warmup', '0', '--sample-period', '0.2'],
-        capture_output=True, text=True, timeout=120, cwd=tmp_path)
+         '--warmup', '0', '--sample-period', '0.2'], cwd=tmp_path)
     assert result.returncode == 0, result.stdout + result.stderr
     report = json.loads((out / 'soak.json').read_text())
     assert report['launch_exit_code'] == 0 and report['missing_stamps'] == {}

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from geometry_msgs.msg import WrenchStamped
+from harness import run_while_progressing
 import numpy as np
 import pytest
 from rclpy.parameter import Parameter
@@ -415,15 +416,13 @@ def test_failed_thruster_set_at_run_time_is_never_used_and_reported(ros) -> None
 ])
 def test_a_broken_yaml_stops_the_process_naming_file_parameter_and_range(
         tmp_path: Path, line: str, message: str) -> None:
-    import subprocess
     import sys
 
     bad = tmp_path / 'thrust_allocator.yaml'
     bad.write_text(f'thrust_allocator:\n  ros__parameters:\n    {line}\n')
-    result = subprocess.run(
+    result = run_while_progressing(
         [sys.executable, '-m', 'tiltrov_ros.nodes.thrust_allocator', '--ros-args',
-         '--params-file', str(config_file('robot.yaml')), '--params-file', str(bad)],
-        capture_output=True, text=True, timeout=60)
+         '--params-file', str(config_file('robot.yaml')), '--params-file', str(bad)])
     assert result.returncode == 1
     assert f"thrust_allocator: parameter {message.format(file=bad)}" in result.stderr
 

@@ -550,8 +550,8 @@ def test_recording_into_a_full_disk_fails_the_launch_and_says_what_was_lost(
 
 
 def _bag_info(bag: Path) -> str:
-    result = subprocess.run([sys.executable, '-m', 'tiltrov_ros.cli', 'bag', 'info', str(bag)],
-                            capture_output=True, text=True, timeout=60)
+    result = run_while_progressing([sys.executable, '-m', 'tiltrov_ros.cli', 'bag', 'info',
+                                    str(bag)])
     assert result.returncode == 0, result.stdout + result.stderr
     return result.stdout
 
@@ -688,8 +688,8 @@ def test_bag_repair_of_a_garbage_metadata_file_is_one_line(tmp_path: Path) -> No
                                     '--duration', '0.5', '--record', str(bag)], cwd=tmp_path)
     assert result.returncode == 0, result.stdout + result.stderr
     (bag / 'metadata.yaml').write_bytes(bytes(range(256)) * 8)
-    repaired = subprocess.run([sys.executable, '-m', 'tiltrov_ros.cli', 'bag', 'repair',
-                               str(bag)], capture_output=True, text=True, timeout=60)
+    repaired = run_while_progressing([sys.executable, '-m', 'tiltrov_ros.cli', 'bag', 'repair',
+                               str(bag)])
     assert repaired.returncode == 0, repaired.stdout + repaired.stderr
     assert 'Traceback' not in repaired.stdout + repaired.stderr
     assert 'recovered' in repaired.stdout
