@@ -35,6 +35,7 @@ import argparse
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 import json
+import math
 import os
 from pathlib import Path
 import random
@@ -129,11 +130,17 @@ def recorded(runs: int, busy: int, duration: float = 120.0) -> dict[str, Any]:
 
 def _tracking_errors(bag: Path, after: float = 8.0) -> tuple[float, float]:
     """Largest position error norm (m) and attitude error (rad, the largest of roll, pitch,
-    yaw) after ``after`` s, against the scenario's setpoint (current_hold: hold the origin)."""
+    yaw) after ``after`` s, against the scenario's setpoint (current_hold: hold the origin);
+    NaN for a bag that is missing or cannot be read (a run that lost it: reported as such,
+    never within the bound)."""
     from tiltrov_ros.bag.reader import read_runlog
+    from tiltrov_ros.core.errors import TiltrovError
     from tiltrov_ros.core.kinematics import euler_from_quat_rows
 
-    log = read_runlog(bag)
+    try:
+        log = read_runlog(bag)
+    except (TiltrovError, OSError):
+        return math.nan, math.nan
     keep = log.t >= after
     position = np.linalg.norm(log.position[keep], axis=1)
     euler = euler_from_quat_rows(log.quaternion[keep])
@@ -149,7 +156,7 @@ def realtime(busy: int, duration: float = 30.0) -> dict[str, Any]:
             code, _, wall = _launch('--scenario', 'current_hold', '--controller', 'pid',
                                     '--realtime', '--duration', f'{duration:g}',
                                     '--record', str(bag))
-            position, attitude = _tracking_errors(bag) if bag.exists() else (np.nan, np.nan)
+            position, attitude = _tracking_errors(bag)
             out[label] = {'exit_code': code, 'max_position_error_m': position,
                           'max_attitude_error_deg': float(np.degrees(attitude)),
                           'wall_s': wall}
@@ -274,12 +281,12 @@ def restarts(tries: int, lockstep_kills: int, busy: int, seed: int = 2026) -> di
                 with busy_loops(loops):
                     realtime_args = ('--realtime', '--duration', '30')
                     code, bag, _ = _run_with_kills(path, realtime_args, (), env, tmp)
-                    base = _tracking_errors(bag) if bag.exists() else (np.nan, np.nan)
+                    base = _tracking_errors(bag)
                     tries_out = []
                     for _ in range(tries):
                         code, bag, log = _run_with_kills(path, realtime_args, (10.0, 17.0),
                                                          env, tmp)
-                        errors = _tracking_errors(bag) if bag.exists() else (np.nan, np.nan)
+                        errors = _tracking_errors(bag)
                         tries_out.append({
                             'exit_code': code, 'position_m': errors[0],
                             'attitude_deg': float(np.degrees(errors[1])),
