@@ -89,6 +89,13 @@ def test_misdirected_sections_are_named_once_each(tmp_path: Path) -> None:
     lines = misdirected_sections(shipped, '/robot1/plant_simulator')
     assert len(lines) == 1 and "does not reach this node (/robot1/plant_simulator)" in lines[0]
     assert misdirected_sections(shipped, '/plant_simulator') == []
+    # A respawn's overrides have a section for the node and one for its standby: the
+    # node taking over reads both without a word.
+    both = _write(tmp_path / 'respawn.yaml', ''.join(
+        f'{name}:\n  ros__parameters:\n    x: 1\n'
+        for name in ('thrust_allocator', 'thrust_allocator_standby')))
+    assert misdirected_sections(['--ros-args', '--params-file', both],
+                                '/thrust_allocator') == []
 
 
 def test_p_overrides_the_shipped_node_section(ros) -> None:

@@ -30,7 +30,7 @@ from rclpy.parameter import Parameter
 import yaml
 
 from tiltrov_ros.core import validation
-from tiltrov_ros.core.names import NODES
+from tiltrov_ros.core.names import NODES, standby_name
 from tiltrov_ros.core.params import (
     ROBOT,
     STACK,
@@ -259,7 +259,9 @@ def misdirected_sections(args: Sequence[str], node: str) -> list[str]:
             if base == name:
                 missed.append(f'parameter file {path}: section {key!r} does not reach this '
                               f'node ({node}): name it {node!r} or \'/**\'')
-            elif base not in NODES:
+            elif base not in NODES and base not in {standby_name(n) for n in NODES}:
+                # (a standby's section reaches the standby, and the node it becomes
+                # after a takeover reads its own section from the same file)
                 lines.append(f'parameter file {path}: section {key!r} names no node of '
                              f'tiltrov_ros ({", ".join(NODES)}); its parameters reach none')
     return lines + ([] if reached else missed)
