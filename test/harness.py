@@ -84,6 +84,15 @@ def spin_while_progressing(executor: Any, predicate: Callable[[], bool],
     changing: give up once it has not changed for ``idle`` wall seconds (a hang, however
     slow the machine; a loaded one takes longer, never too long). Returns the last value
     of the predicate, so tests ``assert`` on it."""
+    return progressing_until(predicate, progress, idle,
+                             lambda: executor.spin_once(timeout_sec=step))
+
+
+def progressing_until(predicate: Callable[[], bool], progress: Callable[[], object],
+                      idle: float = 120.0, pause: Callable[[], None] | None = None) -> bool:
+    """Until ``predicate()`` is true, for as long as ``progress()`` keeps changing: False
+    once it has not changed for ``idle`` wall seconds (a hang, however slow the machine).
+    ``pause`` runs between looks (default: sleep 0.05 s)."""
     seen, since = progress(), time.monotonic()
     while not predicate():
         now = progress()
@@ -91,7 +100,10 @@ def spin_while_progressing(executor: Any, predicate: Callable[[], bool],
             seen, since = now, time.monotonic()
         elif time.monotonic() - since > idle:
             return bool(predicate())
-        executor.spin_once(timeout_sec=step)
+        if pause is None:
+            time.sleep(0.05)
+        else:
+            pause()
     return True
 
 
@@ -145,14 +157,8 @@ def wait_while_progressing(proc: Any, idle: float = 120.0) -> int:
     """Wait for ``proc`` (a Popen) to end, for as long as its process tree keeps using CPU
     (:class:`TreeProgress`): its exit code; AssertionError once it has used none for
     ``idle`` wall seconds (a hang, not a slow machine)."""
-    progress = TreeProgress(proc.pid)
-    seen, since = progress(), time.monotonic()
-    while proc.poll() is None:
-        now = progress()
-        if now != seen:
-            seen, since = now, time.monotonic()
-        assert time.monotonic() - since <= idle, f'pid {proc.pid} idle for {idle} s'
-        time.sleep(0.05)
+    assert progressing_until(lambda: proc.poll() is not None, TreeProgress(proc.pid), idle), \
+        f'pid {proc.pid} idle for {idle} s'
     return int(proc.returncode)
 
 

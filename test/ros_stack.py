@@ -20,7 +20,7 @@ from typing import Any
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
 from harness import HANG_BOUND as HANG_BOUND  # re-exported: the tests import it from here
-from harness import TreeProgress, spin_while_progressing
+from harness import TreeProgress, progressing_until, spin_while_progressing
 from nav_msgs.msg import Odometry
 import numpy as np
 import pytest
@@ -336,26 +336,20 @@ class LaunchProcess:
         says nothing new and uses no CPU for ``idle`` wall seconds meanwhile is hung (a
         loaded machine starts the nodes slowly: 80 s once beside two busy loops and
         another stack)."""
-        seen, since = self.progress(), time.monotonic()
-        while self.status().get('state') != 'running':
-            assert self.process.poll() is None, self.output
-            if self.progress() != seen:
-                seen, since = self.progress(), time.monotonic()
-            assert time.monotonic() - since < idle, self.output
-            time.sleep(0.05)
+        def running() -> bool:
+            return self.status().get('state') == 'running'
+
+        progressing_until(lambda: running() or self.process.poll() is not None,
+                          self.progress, idle)
+        assert running(), self.output       # not ended, not hung
         return self.pids()
 
     def finish(self, idle: float = 120.0) -> int:
         """The launch's exit code once it has ended, however slowly (AssertionError when
         it said nothing new and used no CPU for ``idle`` wall seconds: a hang)."""
-        seen, since = self.progress(), time.monotonic()
-        while self.process.poll() is None:
-            if self.progress() != seen:
-                seen, since = self.progress(), time.monotonic()
-            if time.monotonic() - since > idle:
-                raise AssertionError(f'tiltrov launch hung (nothing for {idle} s):\n'
-                                     + self.output)
-            time.sleep(0.05)
+        if not progressing_until(lambda: self.process.poll() is not None, self.progress, idle):
+            raise AssertionError(f'tiltrov launch hung (nothing for {idle} s):\n'
+                                 + self.output)
         self._reader.join(timeout=5)
         return int(self.process.returncode)
 

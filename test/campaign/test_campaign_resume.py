@@ -9,10 +9,9 @@ import shutil
 import signal
 import subprocess
 import sys
-import time
 
 from campaign_run import IDS, TINY, CampaignRun, comparable, read_rows, tiltrov_campaign
-from harness import HANG_BOUND, TreeProgress
+from harness import HANG_BOUND, TreeProgress, progressing_until
 import pytest
 import yaml
 
@@ -31,13 +30,12 @@ def test_an_interrupted_campaign_resumes_without_losing_or_repeating_a_run(
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True)
     try:
-        progress = TreeProgress(proc.pid)
-        seen, since = progress(), time.monotonic()
-        while not (table.is_file() and len(table.read_text().splitlines()) >= 4):
-            if progress() != seen:
-                seen, since = progress(), time.monotonic()
-            assert proc.poll() is None and time.monotonic() - since < 120, proc.communicate()
-            time.sleep(0.05)
+        def rows_written() -> bool:
+            return table.is_file() and len(table.read_text().splitlines()) >= 4
+
+        progressing_until(lambda: rows_written() or proc.poll() is not None,
+                          TreeProgress(proc.pid))
+        assert rows_written(), proc.communicate()       # not ended, not hung
         os.killpg(proc.pid, signal.SIGINT)
         stdout, stderr = proc.communicate()     # to its end; a hang is HANG_BOUND's
     finally:

@@ -10,12 +10,11 @@ from pathlib import Path
 import signal
 import subprocess
 import sys
-import time
 from typing import NamedTuple
 
 from campaign_run import CampaignRun, comparable, read_rows, tiltrov_campaign
 from distributed import Client
-from harness import HANG_BOUND, TreeProgress
+from harness import HANG_BOUND, TreeProgress, progressing_until
 import pytest
 
 from tiltrov_ros.campaign import execute
@@ -42,14 +41,9 @@ def _wait(done: Callable[[], bool], processes: list[subprocess.Popen[bytes]],
           log: Path, idle: float = 120.0) -> None:
     """Until ``done()``, however slowly a loaded machine starts ``processes``: failing
     when one of them has ended, or none has used CPU for ``idle`` s (a hang)."""
-    progress = TreeProgress(*(p.pid for p in processes))
-    seen, since = progress(), time.monotonic()
-    while not done():
-        if progress() != seen:
-            seen, since = progress(), time.monotonic()
-        assert all(p.poll() is None for p in processes), log.read_text()
-        assert time.monotonic() - since < idle, log.read_text()
-        time.sleep(0.1)
+    progressing_until(lambda: done() or any(p.poll() is not None for p in processes),
+                      TreeProgress(*(p.pid for p in processes)), idle)
+    assert done(), log.read_text()       # none ended, not hung
 
 
 class Cluster(NamedTuple):

@@ -688,8 +688,8 @@ def test_bag_repair_of_a_garbage_metadata_file_is_one_line(tmp_path: Path) -> No
                                     '--duration', '0.5', '--record', str(bag)], cwd=tmp_path)
     assert result.returncode == 0, result.stdout + result.stderr
     (bag / 'metadata.yaml').write_bytes(bytes(range(256)) * 8)
-    repaired = run_while_progressing([sys.executable, '-m', 'tiltrov_ros.cli', 'bag', 'repair',
-                               str(bag)])
+    repaired = run_while_progressing([sys.executable, '-m', 'tiltrov_ros.cli', 'bag',
+                                      'repair', str(bag)])
     assert repaired.returncode == 0, repaired.stdout + repaired.stderr
     assert 'Traceback' not in repaired.stdout + repaired.stderr
     assert 'recovered' in repaired.stdout
