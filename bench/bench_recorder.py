@@ -15,6 +15,9 @@ wrench_cmd, thrust_cmd, tilt_cmd, wrench_achieved), pre-serialized:
 * the recorder fed at fixed rates by publishers with KEEP_LAST depth 10 (rclpy's
   default QoS, what the stack's nodes use): where loss begins.
 
+Every process runs with the stack's Fast DDS profile (config/fastdds.xml), as the
+launchers start the recorder, unless the environment names another.
+
 Run: ``.venv/bin/python bench/bench_recorder.py [--messages N]``. Prints a
 table and returns the numbers from ``main()``.
 """
@@ -32,9 +35,15 @@ import tempfile
 import time
 from typing import Any
 
+from tiltrov_ros.stack.specs import dds_environment
+
 # Isolate DDS like the test suite does, before rclpy is imported.
 os.environ.setdefault('ROS_DOMAIN_ID', str(random.SystemRandom().randint(102, 200)))
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+# The Fast DDS profile the launchers give the recorder and every node (config/fastdds.xml),
+# unless the environment names one: with Fast DDS's defaults (3 s heartbeats) a burst
+# that overflows a shared-memory port waits seconds for its repair.
+os.environ.update(dds_environment(os.environ))
 
 RATES = (10_000, 20_000, 30_000, 40_000)  # msg/s, for the depth-10 publishers
 TOPICS = {
