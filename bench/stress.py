@@ -19,7 +19,8 @@ does to the stack, beside CPU-bound busy loops (``python3 -c 'while True: pass'`
   temporary workspace), the allocator killed about 10 s and the controller about 17 s
   into a recorded realtime ``current_hold`` pid run, ``--restart-tries`` times quiet and
   beside the busy loops, each with the same run without kills: its errors after t = 8 s
-  against that run's (the bound: + 50 mm, + 3 deg); and ``--lockstep-kills`` recorded
+  against that run's (the bound: + 50 mm, + 3 deg), and the longest time without a new
+  ``thrust_cmd`` (the takeovers' gap in the commands); and ``--lockstep-kills`` recorded
   120 s lockstep runs with both killed at seeded random sim times: the largest
   difference from the headless run without kills (the contract: 0) and steps or ticks
   missing from the bag.
@@ -145,6 +146,23 @@ def _tracking_errors(bag: Path, after: float = 8.0) -> tuple[float, float]:
     position = np.linalg.norm(log.position[keep], axis=1)
     euler = euler_from_quat_rows(log.quaternion[keep])
     return float(position.max()), float(np.abs(euler).max())
+
+
+def _command_gap(bag: Path, after: float = 8.0, topic: str = '/thrust_cmd') -> float:
+    """The longest time (s of log time, which is sim time) between two ``topic`` messages
+    after ``after`` s: in a realtime restart run, how long the plant went without a new
+    command while a node was taken over (NaN for a bag that cannot be read)."""
+    from rosbags.rosbag2 import Reader
+
+    try:
+        with Reader(bag) as reader:
+            connections = [c for c in reader.connections if c.topic == topic]
+            times = np.array([t for _, t, _ in reader.messages(connections=connections)],
+                             dtype=np.int64)
+    except Exception:
+        return math.nan
+    times = times[times >= after * 1e9]
+    return float(np.diff(times).max() / 1e9) if len(times) > 1 else math.nan
 
 
 def realtime(busy: int, duration: float = 30.0) -> dict[str, Any]:
@@ -282,6 +300,7 @@ def restarts(tries: int, lockstep_kills: int, busy: int, seed: int = 2026) -> di
                     realtime_args = ('--realtime', '--duration', '30')
                     code, bag, _ = _run_with_kills(path, realtime_args, (), env, tmp)
                     base = _tracking_errors(bag)
+                    base_gap = _command_gap(bag)
                     tries_out = []
                     for _ in range(tries):
                         code, bag, log = _run_with_kills(path, realtime_args, (10.0, 17.0),
@@ -292,9 +311,11 @@ def restarts(tries: int, lockstep_kills: int, busy: int, seed: int = 2026) -> di
                             'attitude_deg': float(np.degrees(errors[1])),
                             'within_bound': bool(errors[0] <= base[0] + 0.05 and np.degrees(
                                 errors[1]) <= np.degrees(base[1]) + 3.0),
-                            'takeovers': log.count(': taking over (')})
+                            'takeovers': log.count(': taking over ('),
+                            'command_gap_s': _command_gap(bag)})
                     rows[label] = {'without_kills': {'position_m': base[0],
-                                                     'attitude_deg': float(np.degrees(base[1]))},
+                                                     'attitude_deg': float(np.degrees(base[1])),
+                                                     'command_gap_s': base_gap},
                                    'with_kills': tries_out}
             lock = []
             for _ in range(lockstep_kills):
