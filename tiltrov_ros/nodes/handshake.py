@@ -130,6 +130,31 @@ def _gid(info: Any) -> str:
     return bytes(info.endpoint_gid).hex()
 
 
+#: Hex digits of a gid's GUID prefix (12 bytes): the participant the endpoint belongs to.
+_PREFIX = 24
+#: Attribute of an rclpy context: the GUID prefix of its DDS participant, once known.
+_PARTICIPANT_ATTR = '_tiltrov_participant'
+
+
+def _own_participant(node: Any, topic: str) -> str | None:
+    """The GUID prefix of ``node``'s DDS participant, from its endpoints on ``topic`` while
+    they all have one (a node's own endpoints are in its graph at once), kept on the
+    context for a node built later in the same participant: the node a standby builds at a
+    takeover, whose graph may still hold its killed predecessor's endpoints under the same
+    name (until the dead participant's lease ends). None while nothing tells."""
+    context = node.context
+    known = getattr(context, _PARTICIPANT_ATTR, None)
+    if known is not None:
+        return str(known)
+    prefixes = {_gid(i)[:_PREFIX] for i in node.get_publishers_info_by_topic(topic)
+                if i.node_name == node.get_name() and i.node_namespace == node.get_namespace()}
+    if len(prefixes) != 1:
+        return None
+    prefix = prefixes.pop()
+    setattr(context, _PARTICIPANT_ATTR, prefix)
+    return prefix
+
+
 class Handshake:
     """One node's part of the run's handshake (see the module docstring).
 
@@ -161,6 +186,8 @@ class Handshake:
         self._answered: set[str] = set()
         self._pub: Any = None
         self._timer: Any = None
+        #: GUID prefix of this node's DDS participant (:func:`_own_participant`).
+        self.participant: str | None = None
         self.started = False
 
     @property
@@ -175,6 +202,7 @@ class Handshake:
         self.started = True
         node = self.node
         self._pub = node.create_publisher(DiagnosticStatus, HANDSHAKE, LATCHED_QOS)
+        self.participant = _own_participant(node, self._resolved(HANDSHAKE))
         node.create_subscription(DiagnosticStatus, HANDSHAKE, self._on_state,
                                  HANDSHAKE_READER_QOS)
         self._timer = node.create_timer(POLL, self._poll,
@@ -198,14 +226,16 @@ class Handshake:
     def _gids(self, endpoints: Iterable[Any], *, publishers: bool
               ) -> frozenset[tuple[str, str]]:
         """(topic, gid) of this node's ``endpoints`` (from its own graph, where they are
-        at once; a restarted node's graph holds none of its predecessor's)."""
+        at once; those of its participant only: a node built by its standby may still see
+        its killed predecessor's endpoints under its own name)."""
         node = self.node
         found = set()
         for topic in {e.topic_name for e in endpoints}:
             infos = (node.get_publishers_info_by_topic(topic) if publishers
                      else node.get_subscriptions_info_by_topic(topic))
             found.update((topic, _gid(i)) for i in infos
-                         if i.node_name == self.name and i.node_namespace == self.namespace)
+                         if i.node_name == self.name and i.node_namespace == self.namespace
+                         and _gid(i).startswith(self.participant or ''))
         return frozenset(found)
 
     def own_state(self) -> NodeState:
