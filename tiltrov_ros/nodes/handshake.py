@@ -137,21 +137,24 @@ _PARTICIPANT_ATTR = '_tiltrov_participant'
 
 
 def _own_participant(node: Any, topic: str) -> str | None:
-    """The GUID prefix of ``node``'s DDS participant, from its endpoints on ``topic`` while
-    they all have one (a node's own endpoints are in its graph at once), kept on the
-    context for a node built later in the same participant: the node a standby builds at a
-    takeover, whose graph may still hold its killed predecessor's endpoints under the same
-    name (until the dead participant's lease ends). None while nothing tells."""
-    context = node.context
-    known = getattr(context, _PARTICIPANT_ATTR, None)
-    if known is not None:
-        return str(known)
+    """The GUID prefix of ``node``'s DDS participant, or None while nothing tells.
+
+    Read from its endpoints on ``topic`` when they all have one prefix (a node's own
+    endpoints are in its graph at once), and kept on the context for a node built later
+    in the same participant: the node a standby builds at a takeover, whose graph may
+    still hold its killed predecessor's endpoints under the same name (until the dead
+    participant's lease ends). The kept prefix is used only while it is among the
+    node's: rmw ends a context's participant with its last node and makes a new one
+    for the next."""
     prefixes = {_gid(i)[:_PREFIX] for i in node.get_publishers_info_by_topic(topic)
                 if i.node_name == node.get_name() and i.node_namespace == node.get_namespace()}
+    known = getattr(node.context, _PARTICIPANT_ATTR, None)
+    if known in prefixes:
+        return str(known)
     if len(prefixes) != 1:
         return None
     prefix = prefixes.pop()
-    setattr(context, _PARTICIPANT_ATTR, prefix)
+    setattr(node.context, _PARTICIPANT_ATTR, prefix)
     return prefix
 
 
