@@ -107,3 +107,33 @@ def test_record_starts_the_recorder_first(tmp_path: Path) -> None:
     assert recorder.overrides['use_sim_time'] is True
     # The plant waits for the recorder too before it starts the run.
     assert _spec(specs, 'plant_simulator').overrides['startup_subscribers'] == 2
+
+
+def test_a_standby_file_written_again_is_never_seen_half_written(tmp_path: Path) -> None:
+    """At every takeover the launcher writes the new standby's overrides file again while
+    the node taking over reads that same file (its parameters in command-line order): a
+    reader must always find the whole file, never a truncated one (which once built a
+    taken-over pid controller as the config file's pd)."""
+    import threading
+
+    specs, _, _ = stack_specs(LaunchOptions(controller='pid', respawn=('wrench_controller',)))
+    spec = _spec(specs, 'wrench_controller')
+    path = spec.write_overrides(tmp_path, standby=True)
+    whole = path.read_text()
+    seen: list[str] = []
+    done = threading.Event()
+
+    def read() -> None:
+        while not done.is_set():
+            seen.append(path.read_text())
+
+    reader = threading.Thread(target=read)
+    reader.start()
+    try:
+        for _ in range(300):
+            spec.write_overrides(tmp_path, standby=True)
+    finally:
+        done.set()
+        reader.join()
+    assert seen and all(text == whole for text in seen)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [path.name]

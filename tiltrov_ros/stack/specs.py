@@ -13,6 +13,7 @@ from collections.abc import Iterable, Mapping, Sequence
 import copy
 from dataclasses import dataclass, field
 import json
+import os
 from pathlib import Path
 from typing import Any
 
@@ -129,8 +130,12 @@ class NodeSpec:
         if standby:     # a copy: YAML aliases are not read by rcl
             document[f'{namespace}/{standby_name(self.name)}'] = copy.deepcopy(
                 document[f'{namespace}/{self.name}'])
-        with path.open('w', encoding='utf-8') as stream:
+        # Written aside and renamed into place: a new standby's file is written again at
+        # every takeover, while the node taking over reads it (its command-line order).
+        partial = path.with_name(f'.{path.name}.partial')
+        with partial.open('w', encoding='utf-8') as stream:
             yaml.safe_dump(document, stream, sort_keys=False)
+        os.replace(partial, path)
         return path
 
     def ros_args(self, overrides_file: Path | None, namespace: str = '') -> list[str]:
