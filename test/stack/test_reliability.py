@@ -231,10 +231,16 @@ def test_rejected_odometry_stamped_ahead_does_not_take_control(ros: Any,
 def test_a_valid_command_stamped_ahead_does_not_shut_out_the_real_ones(ros: Any,
                                                                        tmp_path: Path) -> None:
     """A tool sending a valid thrust_cmd (zero thrust) stamped 0.45 s ahead of the plant,
-    every 0.4 s for 5 s (realtime): rejected (``future_stamp``: no state it can answer
-    has been published), and the robot holds its depth on the real commands (before:
-    the plant applies the latest command by stamp, so each one shut out the real,
-    earlier-stamped commands and the robot sank)."""
+    every 0.4 s for at least 5 s (realtime): rejected (``future_stamp``: no state it can
+    answer has been published), and the robot holds its depth on the real commands
+    (before: the plant applies the latest command by stamp, so each one shut out the
+    real, earlier-stamped commands and the robot sank).
+
+    The attack goes on until 13 commands have reached the plant ahead of it. "Ahead" is
+    judged from the test's view of the plant's time, which a loaded machine can hold back
+    by more than the lead: such a command reaches the plant stamped at or before its time,
+    is a valid command (the next real one, a tick later, replaces it) and is not counted.
+    So the count is a condition, not a share of what was sent."""
     launch = LaunchProcess(tmp_path, '--realtime', '--duration', '600')
     try:
         launch.wait_running()
@@ -252,20 +258,23 @@ def test_a_valid_command_stamped_ahead_does_not_shut_out_the_real_ones(ros: Any,
         sent = 0
         next_at = start
 
+        def rejected() -> int:
+            return _count(probe, PLANT, 'rejected.thrust_cmd.future_stamp')
+
         def attack() -> bool:
             nonlocal sent, next_at
             now = sim.ns
-            if now >= next_at and sent < 13:
+            if now >= next_at and rejected() < 13:
                 pub.publish(joint_state(now + 450_000_000,
                                         [f'thruster_{i}' for i in range(1, 5)],
                                         effort=[0.0] * 4))
                 sent += 1
                 next_at = now + 400_000_000
-            return sent == 13 and now >= start + 5 * NS_PER_S
+            return rejected() >= 13 and now >= start + 5 * NS_PER_S
 
-        assert ros.spin_until(attack, timeout=60.0), launch.output
-        assert ros.spin_until(
-            lambda: _count(probe, PLANT, 'rejected.thrust_cmd.future_stamp') == 13)
+        assert ros.spin_until(attack, timeout=300.0), (sent, rejected(), launch.output)
+        # Only the attack's commands were ahead: the allocator's real ones never are.
+        assert 13 <= rejected() <= sent, (rejected(), sent)
         _assert_thrust_kept(watch, start)
     finally:
         launch.cleanup()
