@@ -29,7 +29,6 @@ written untouched.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-import os
 from pathlib import Path
 from typing import Any, BinaryIO, Literal
 
@@ -46,6 +45,7 @@ from rosbags.rosbag2.metadata import dump_qos_v9
 import yaml
 
 from .. import __version__
+from ..core.atomic import replace_text
 from ..core.errors import BagError
 from .msgdefs import message_definition
 
@@ -284,11 +284,9 @@ class BagWriter:
         }
 
     def _write_metadata_yaml(self, *, provisional: bool) -> None:
-        target = self.path / 'metadata.yaml'
-        tmp = target.with_suffix('.yaml.tmp')
-        tmp.write_text(yaml.safe_dump({'rosbag2_bagfile_information': self._info(
-            provisional=provisional)}, sort_keys=False), encoding='utf8')
-        os.replace(tmp, target)
+        replace_text(self.path / 'metadata.yaml', yaml.safe_dump(
+            {'rosbag2_bagfile_information': self._info(provisional=provisional)},
+            sort_keys=False))
 
     def __enter__(self) -> BagWriter:
         return self

@@ -13,12 +13,12 @@ from collections.abc import Iterable, Mapping, Sequence
 import copy
 from dataclasses import dataclass, field
 import json
-import os
 from pathlib import Path
 from typing import Any
 
 import yaml
 
+from tiltrov_ros.core.atomic import replace_text
 from tiltrov_ros.core.errors import TiltrovError
 from tiltrov_ros.core.names import (
     ALLOCATOR,
@@ -132,10 +132,7 @@ class NodeSpec:
                 document[f'{namespace}/{self.name}'])
         # Written aside and renamed into place: a new standby's file is written again at
         # every takeover, while the node taking over reads it (its command-line order).
-        partial = path.with_name(f'.{path.name}.partial')
-        with partial.open('w', encoding='utf-8') as stream:
-            yaml.safe_dump(document, stream, sort_keys=False)
-        os.replace(partial, path)
+        replace_text(path, yaml.safe_dump(document, sort_keys=False))
         return path
 
     def ros_args(self, overrides_file: Path | None, namespace: str = '') -> list[str]:

@@ -31,6 +31,7 @@ import time
 from typing import IO, Any
 
 from tiltrov_ros import paths
+from tiltrov_ros.core.atomic import replace_text
 from tiltrov_ros.core.names import (
     PLANT,
     RECORDER,
@@ -168,9 +169,7 @@ class StatusFile:
         if self.path is None:
             return
         document = {'state': state, 'exit_code': exit_code, 'nodes': dict(nodes)}
-        tmp = self.path.with_name(f'.{self.path.name}.tmp')
-        tmp.write_text(json.dumps(document, indent=1) + '\n', encoding='utf-8')
-        os.replace(tmp, self.path)
+        replace_text(self.path, json.dumps(document, indent=1) + '\n')
 
 
 class _Supervisor:
