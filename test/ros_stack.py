@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 import json
 import os
 from pathlib import Path
+import re
 import signal
 import subprocess
 import sys
@@ -387,6 +388,36 @@ def alive(pid: int) -> bool:
     except ProcessLookupError:
         return False
     return True
+
+
+def kill_now(pid: int) -> float:
+    """SIGKILL ``pid``; the wall time (``time.time()``, the clock of the nodes' log lines)
+    once it is dead: gone (perhaps before the kill: a run that ended stops its nodes), or
+    a zombie its parent has not reaped yet."""
+    try:
+        os.kill(pid, signal.SIGKILL)
+    except ProcessLookupError:
+        return time.time()
+    while True:
+        try:
+            fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
+        except (FileNotFoundError, ProcessLookupError):
+            break
+        if fields[0] in ('Z', 'X'):
+            break
+        time.sleep(0.001)       # a few ms at most: SIGKILL cannot be caught
+    return time.time()
+
+
+#: The plant's log line at the end of a run, with its wall time (rcutils' log format).
+_END_LINE = re.compile(r'\[(\d+\.\d+)\] \[plant_simulator\]: reached the end of the run')
+
+
+def ended_by(output: str, moment: float) -> bool:
+    """Whether a launch's ``output`` says its plant reached the run's end at or before the
+    wall time ``moment``: a node killed then was killed after the run, not in it."""
+    found = _END_LINE.search(output)
+    return found is not None and float(found[1]) <= moment
 
 
 #: The series of a recorded run that equal the headless runner's (``run_scenario``).

@@ -13,7 +13,7 @@ from harness import TreeProgress
 import numpy as np
 import pytest
 from ros2_cli import Ros2, ctrl_c, doc_commands, wait_nodes
-from ros_stack import HANG_BOUND, assert_same_run, joined_sim_time
+from ros_stack import HANG_BOUND, assert_same_run, ended_by, joined_sim_time, kill_now
 
 from tiltrov_ros.core.runner import run_scenario, stack_config
 from tiltrov_ros.stack.specs import LaunchOptions
@@ -21,6 +21,8 @@ from tiltrov_ros.stack.specs import LaunchOptions
 REPO = Path(__file__).resolve().parents[2]
 LAUNCH = ('launch', 'tiltrov_ros', 'tiltrov.launch.py')
 NODES = ('plant_simulator', 'wrench_controller', 'thrust_allocator', 'reference_publisher')
+#: Tries of a run whose nodes are killed in it (each four times as long as the one before).
+TRIES = 3
 
 
 def test_show_args_lists_the_documented_arguments(ros2: Ros2) -> None:
@@ -92,24 +94,54 @@ def test_respawned_nodes_are_taken_over_bit_for_bit(ros: Any, ros2: Ros2, tmp_pa
     ticks; each one's standby (a node of the run's handshake) takes over with the state
     handed over, the launch goes on (a respawned node's exit does not end it), ends with
     exit code 0, and the bag is the headless run without kills to the last bit, every
-    step and tick in it."""
+    step and tick in it. A try whose kills came after the run had ended (a loaded
+    machine can be that late: a 10 s lockstep run ends about a second after it starts)
+    tests nothing and is made again, four times as long."""
     from tiltrov_ros.bag.losses import missing_stamps
     from tiltrov_ros.bag.reader import read_runlog
 
     victims = ('wrench_controller', 'thrust_allocator')
-    log = tmp_path / 'launch.log'
-    # The probe joins the run: a short lockstep run does not end before it sees a tick.
-    sim = joined_sim_time(ros, LaunchOptions(record=tmp_path / 'bag', respawn=victims,
-                                             join=('restart_probe',)), 'restart_probe')
+    for attempt in range(TRIES):
+        run_dir = tmp_path / f'try{attempt}'
+        run_dir.mkdir()
+        output = _killed_run(ros, ros2, run_dir, victims, kill_at, duration,
+                             f'restart_probe{attempt}')
+        if output is not None:
+            break
+        duration *= 4
+    else:
+        pytest.fail(f'in {TRIES} tries the kills came after the run had ended')
+    for victim in victims:
+        kept = re.search(rf'{victim}: taking over \((\d+) handoff messages kept\)', output)
+        assert kept is not None and int(kept[1]) > 0, output[-5000:]
+    assert len(set(kill_at)) <= output.count('every node of the run is ready again') \
+        <= len(victims), output[-5000:]
+    assert 'not bumpless' not in output and 'starts from zero' not in output
+    bag = run_dir / 'bag'
+    assert missing_stamps(bag, duration * 10**9, 10**7, 5 * 10**7) == {}
+    assert_same_run(read_runlog(bag), run_scenario(stack_config('current_hold', 'pid'),
+                                                   duration=float(duration)), atol=0.0)
+
+
+def _killed_run(ros: Any, ros2: Ros2, run_dir: Path, victims: tuple[str, ...],
+                kill_at: tuple[float, ...], duration: int, probe: str) -> str | None:
+    """One recorded lockstep launch with ``victims`` respawned, each killed once the probe
+    (a node of the run, so the run waits for it at the start) has seen ``kill_at``: the
+    launch's output, or None when the plant had reached the run's end before the last
+    victim was dead."""
+    log = run_dir / 'launch.log'
+    sim = joined_sim_time(ros, LaunchOptions(record=run_dir / 'bag', respawn=victims,
+                                             join=(probe,)), probe)
     proc = ros2.start(['ros2', *LAUNCH, 'scenario:=current_hold', 'controller:=pid',
                        f'duration:={duration}', 'record:=bag',
-                       f'respawn:={",".join(victims)}', 'join:=restart_probe'], tmp_path, log)
+                       f'respawn:={",".join(victims)}', f'join:={probe}'], run_dir, log)
 
     cpu = TreeProgress(proc.pid)
 
     def progress() -> tuple[int, int, int]:   # sim time, the launch saying or doing something
         return sim.ns, log.stat().st_size, cpu()
 
+    dead = 0.0
     try:
         for victim, at in zip(victims, kill_at):
             assert ros.spin_while_progressing(lambda at=at: sim.reached(at), progress), \
@@ -117,22 +149,15 @@ def test_respawned_nodes_are_taken_over_bit_for_bit(ros: Any, ros2: Ros2, tmp_pa
             # The first process of the executable is the node (its standby starts after).
             pid = int(re.search(rf'\[{victim}-\d+\]: process started with pid \[(\d+)\]',
                                 log.read_text())[1])
-            os.kill(pid, signal.SIGKILL)
+            dead = kill_now(pid)
         assert ros.spin_while_progressing(lambda: proc.poll() is not None, progress), \
             log.read_text()[-5000:]
-        assert proc.returncode == 0, log.read_text()[-5000:]
+        output = log.read_text()
+        if ended_by(output, dead):
+            return None
+        assert proc.returncode == 0, output[-5000:]
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
-    output = log.read_text()
-    for victim in victims:
-        kept = re.search(rf'{victim}: taking over \((\d+) handoff messages kept\)', output)
-        assert kept is not None and int(kept[1]) > 0, output[-5000:]
-    assert len(set(kill_at)) <= output.count('every node of the run is ready again') \
-        <= len(victims), output[-5000:]
-    assert 'not bumpless' not in output and 'starts from zero' not in output
-    bag = tmp_path / 'bag'
-    assert missing_stamps(bag, duration * 10**9, 10**7, 5 * 10**7) == {}
-    assert_same_run(read_runlog(bag), run_scenario(stack_config('current_hold', 'pid'),
-                                                   duration=float(duration)), atol=0.0)
+    return output
 
