@@ -16,7 +16,7 @@ import subprocess
 import sys
 import threading
 import time
-from typing import Any
+from typing import Any, TypeVar
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
@@ -407,6 +407,28 @@ def kill_now(pid: int) -> float:
             break
         time.sleep(0.001)       # a few ms at most: SIGKILL cannot be caught
     return time.time()
+
+
+#: Tries of a run whose nodes are killed in it (each four times as long as the one before).
+KILL_TRIES = 3
+_Duration = TypeVar('_Duration', int, float)
+
+
+def killed_in_run(tmp_path: Path, duration: _Duration,
+                  one: Callable[[Path, _Duration, str], str | None]
+                  ) -> tuple[Path, _Duration, str]:
+    """``one(run_dir, duration, probe)``: a run whose nodes are killed, its output, or None
+    when the kills came after the run had ended (it tested nothing: a loaded machine can
+    be that late, a 10 s lockstep run ends about a second after it starts). Made again,
+    four times as long, until the kills land in the run: (run_dir, duration, output)."""
+    for attempt in range(KILL_TRIES):
+        run_dir = tmp_path / f'try{attempt}'
+        run_dir.mkdir()
+        output = one(run_dir, duration, f'restart_probe{attempt}')
+        if output is not None:
+            return run_dir, duration, output
+        duration = duration * 4
+    pytest.fail(f'in {KILL_TRIES} tries the kills came after the run had ended')
 
 
 #: The plant's log line at the end of a run, with its wall time (rcutils' log format).

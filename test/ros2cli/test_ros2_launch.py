@@ -13,7 +13,14 @@ from harness import TreeProgress
 import numpy as np
 import pytest
 from ros2_cli import Ros2, ctrl_c, doc_commands, wait_nodes
-from ros_stack import HANG_BOUND, assert_same_run, ended_by, joined_sim_time, kill_now
+from ros_stack import (
+    HANG_BOUND,
+    assert_same_run,
+    ended_by,
+    joined_sim_time,
+    kill_now,
+    killed_in_run,
+)
 
 from tiltrov_ros.core.runner import run_scenario, stack_config
 from tiltrov_ros.stack.specs import LaunchOptions
@@ -21,8 +28,6 @@ from tiltrov_ros.stack.specs import LaunchOptions
 REPO = Path(__file__).resolve().parents[2]
 LAUNCH = ('launch', 'tiltrov_ros', 'tiltrov.launch.py')
 NODES = ('plant_simulator', 'wrench_controller', 'thrust_allocator', 'reference_publisher')
-#: Tries of a run whose nodes are killed in it (each four times as long as the one before).
-TRIES = 3
 
 
 def test_show_args_lists_the_documented_arguments(ros2: Ros2) -> None:
@@ -94,23 +99,16 @@ def test_respawned_nodes_are_taken_over_bit_for_bit(ros: Any, ros2: Ros2, tmp_pa
     ticks; each one's standby (a node of the run's handshake) takes over with the state
     handed over, the launch goes on (a respawned node's exit does not end it), ends with
     exit code 0, and the bag is the headless run without kills to the last bit, every
-    step and tick in it. A try whose kills came after the run had ended (a loaded
-    machine can be that late: a 10 s lockstep run ends about a second after it starts)
-    tests nothing and is made again, four times as long."""
+    step and tick in it. A try whose kills came after the run had ended is made again,
+    longer (``killed_in_run``)."""
     from tiltrov_ros.bag.losses import missing_stamps
     from tiltrov_ros.bag.reader import read_runlog
 
     victims = ('wrench_controller', 'thrust_allocator')
-    for attempt in range(TRIES):
-        run_dir = tmp_path / f'try{attempt}'
-        run_dir.mkdir()
-        output = _killed_run(ros, ros2, run_dir, victims, kill_at, duration,
-                             f'restart_probe{attempt}')
-        if output is not None:
-            break
-        duration *= 4
-    else:
-        pytest.fail(f'in {TRIES} tries the kills came after the run had ended')
+    run_dir, duration, output = killed_in_run(
+        tmp_path, duration,
+        lambda run_dir, length, probe: _killed_run(ros, ros2, run_dir, victims, kill_at,
+                                                   length, probe))
     for victim in victims:
         kept = re.search(rf'{victim}: taking over \((\d+) handoff messages kept\)', output)
         assert kept is not None and int(kept[1]) > 0, output[-5000:]

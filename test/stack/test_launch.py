@@ -13,7 +13,16 @@ from typing import Any
 from harness import run_while_progressing
 import numpy as np
 import pytest
-from ros_stack import HANG_BOUND, MS, NS, assert_same_run, ended_by, joined_sim_time, kill_now
+from ros_stack import (
+    HANG_BOUND,
+    MS,
+    NS,
+    assert_same_run,
+    ended_by,
+    joined_sim_time,
+    kill_now,
+    killed_in_run,
+)
 from ros_stack import LaunchProcess as _Launch
 from ros_stack import alive as _alive
 from ros_stack import ready as _ready
@@ -22,8 +31,6 @@ from tiltrov_ros.core.runner import run_scenario, stack_config
 from tiltrov_ros.stack.specs import LaunchOptions
 
 NODES = ('thrust_allocator', 'wrench_controller', 'reference_publisher', 'plant_simulator')
-#: Tries of a run whose nodes are killed in it (each four times as long as the one before).
-TRIES = 3
 
 
 # --------------------------------------------------------------------------- processes
@@ -190,21 +197,15 @@ def test_killed_nodes_are_taken_over_bit_for_bit(ros: Any, tmp_path: Path,
     handshake, and the plant publishes the waited tick again once every node has
     matched it. The run ends normally and the bag is the headless run without kills to
     the last bit, every step and tick in it (the plant used no command before the bag
-    had it). A try whose kills came after the run had ended (a loaded machine can be
-    that late: a 10 s lockstep run ends about a second after it starts) tests nothing
-    and is made again, four times as long."""
+    had it). A try whose kills came after the run had ended is made again, longer
+    (``killed_in_run``)."""
     from tiltrov_ros.bag.losses import missing_stamps
     from tiltrov_ros.bag.reader import read_runlog
 
-    for attempt in range(TRIES):
-        run_dir = tmp_path / f'try{attempt}'
-        run_dir.mkdir()
-        out = _killed_run(ros, run_dir, victims, kill_at, duration, f'restart_probe{attempt}')
-        if out is not None:
-            break
-        duration *= 4
-    else:
-        pytest.fail(f'in {TRIES} tries the kills came after the run had ended')
+    run_dir, duration, out = killed_in_run(
+        tmp_path, duration,
+        lambda run_dir, length, probe: _killed_run(ros, run_dir, victims, kill_at, length,
+                                                   probe))
     for victim in victims:
         assert f'{victim} died (exit code {-signal.SIGKILL}); its standby' in out, out
         kept = re.search(rf'{victim}: taking over \((\d+) handoff messages kept\)', out)
